@@ -1,0 +1,15 @@
+//! # filtrace-scene
+//!
+//! The scene description every renderer in filtrace consumes: triangle meshes placed by
+//! instances (so that moving objects only change a transform), materials, lights and a
+//! camera. Loaders turn OBJ/MTL, glTF 2.0, PLY and filtrace's TOML scene files into it;
+//! `builtin` holds the scenes that need no file (the Cornell box is the default).
+//!
+//! The description is plain data: acceleration structures and integrators are built
+//! from it, never stored in it.
+
+pub mod error;
+pub mod types;
+
+pub use error::SceneError;
+pub use types::*;

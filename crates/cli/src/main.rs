@@ -1,1 +1,46 @@
-fn main() {}
+//! `filtrace`: the command line of the filtrace renderer.
+//!
+//! Each subcommand lives in its own module under `cmd/` with its clap `Args` and a `run`.
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+#[derive(Parser)]
+#[command(name = "filtrace", version, about = "Path tracing with screen-space reconstruction filters")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (built-in name, .toml, .obj, .gltf/.glb, .ply); default: the Cornell box.
+    Render(cmd::render::Args),
+    /// Denoise an EXR with a screen-space filter.
+    Denoise(cmd::denoise::Args),
+    /// Compare an image against a reference (MSE, relMSE, PSNR, SSIM, FLIP).
+    Compare(cmd::compare::Args),
+    /// Run an experiment spec: every method at every sample count against a reference.
+    Experiment(cmd::experiment::Args),
+    /// Benchmarks (print a markdown table, or JSON with --json).
+    Bench {
+        #[command(subcommand)]
+        which: cmd::bench::Which,
+    },
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(a) => cmd::render::run(a),
+        Command::Denoise(a) => cmd::denoise::run(a),
+        Command::Compare(a) => cmd::compare::run(a),
+        Command::Experiment(a) => cmd::experiment::run(a),
+        Command::Bench { which } => cmd::bench::run(which),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,8 @@
+//! `filtrace denoise`.
+
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`filtrace denoise` is not implemented yet")
+}

@@ -1,18 +1,28 @@
 //! `filtrace bench ...`: each benchmark prints a markdown table, or one JSON object with `--json`.
+//! One module per benchmark, each owned by the capability it measures.
 
 use clap::Subcommand;
 
 #[derive(Subcommand)]
 pub enum Which {
-    /// Ray casting throughput of the BVH on a mesh.
-    Rays(RaysArgs),
+    /// Ray casting throughput of the BVH on a mesh (OBJ, glTF or PLY).
+    Rays(super::bench_rays::Args),
+    /// Reconstruction filter timings (Dammertz Table 2, Bauszat Table 2 shapes).
+    Filters(super::bench_filters::Args),
+    /// Path tracer samples per second.
+    Render(super::bench_render::Args),
+    /// Filtered pipeline frame time per stage.
+    Pipeline(super::bench_pipeline::Args),
+    /// Adaptive sampling overheads (importance map, apportionment, batches).
+    Adaptive(super::bench_adaptive::Args),
 }
-
-#[derive(clap::Args)]
-pub struct RaysArgs {}
 
 pub fn run(which: Which) -> anyhow::Result<()> {
     match which {
-        Which::Rays(_) => anyhow::bail!("`filtrace bench rays` is not implemented yet"),
+        Which::Rays(a) => super::bench_rays::run(a),
+        Which::Filters(a) => super::bench_filters::run(a),
+        Which::Render(a) => super::bench_render::run(a),
+        Which::Pipeline(a) => super::bench_pipeline::run(a),
+        Which::Adaptive(a) => super::bench_adaptive::run(a),
     }
 }

@@ -1,7 +1,13 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_adaptive;
+pub mod bench_filters;
+pub mod bench_pipeline;
+pub mod bench_rays;
+pub mod bench_render;
 pub mod compare;
 pub mod denoise;
 pub mod experiment;
 pub mod render;
+pub mod render_filtered;

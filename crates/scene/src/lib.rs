@@ -7,9 +7,20 @@
 //!
 //! The description is plain data: acceleration structures and integrators are built
 //! from it, never stored in it.
+//!
+//! ```
+//! let scene = filtrace_scene::load_scene("cornell").unwrap();
+//! assert_eq!(scene.triangle_count(), 36);
+//! ```
 
+pub mod builtin;
 pub mod error;
+pub mod load;
+pub mod obj;
+pub mod texture;
 pub mod types;
 
+pub use builtin::{builtin, builtin_names};
 pub use error::SceneError;
+pub use load::{default_camera_for, load, load_scene};
 pub use types::*;

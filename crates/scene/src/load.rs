@@ -1,0 +1,54 @@
+//! Entry points: load a scene file by extension, or a built-in scene by name.
+
+use std::path::Path;
+
+use filtrace_core::{Aabb, Vec3};
+
+use crate::builtin::{builtin_names, try_builtin};
+use crate::error::SceneError;
+use crate::types::{Camera, Scene};
+
+/// Loads a scene file, choosing the loader from the extension (case-insensitive):
+/// `.obj`, `.gltf`/`.glb`, `.ply`, `.toml`.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    match ext.as_str() {
+        "obj" => crate::obj::load_obj(path),
+        _ => Err(SceneError::Unsupported {
+            what: format!(
+                "{}: unknown scene file extension '{ext}' (expected obj, gltf, glb, ply or toml)",
+                path.display()
+            ),
+        }),
+    }
+}
+
+/// A built-in scene name (see [`builtin_names`]) or a path to a scene file.
+pub fn load_scene(arg: &str) -> Result<Scene, SceneError> {
+    if let Some(r) = try_builtin(arg) {
+        return r;
+    }
+    let path = Path::new(arg);
+    if path.extension().is_none() && !path.exists() {
+        return Err(SceneError::Unsupported {
+            what: format!("'{arg}' is neither a built-in scene ({}) nor a file", builtin_names().join(", ")),
+        });
+    }
+    load(path)
+}
+
+/// A camera that sees all of `bounds` from outside: it looks at the centre of the bounding
+/// sphere along -z, from slightly above (direction (0, 0.25, 1) from the centre), at a distance
+/// where the sphere fits the vertical field of view of 45 degrees with a 10 % margin, up +y.
+/// An empty or non-finite box gives a camera at (0, 0, 5) looking at the origin.
+pub fn default_camera_for(bounds: Aabb) -> Camera {
+    const VFOV_DEG: f32 = 45.0;
+    if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
+        return Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, vfov_deg: VFOV_DEG };
+    }
+    let center = bounds.center();
+    let radius = bounds.bounding_radius().max(1e-3);
+    let distance = 1.1 * radius / (0.5 * VFOV_DEG.to_radians()).sin();
+    let dir = Vec3::new(0.0, 0.25, 1.0).normalize();
+    Camera { eye: center + distance * dir, target: center, up: Vec3::Y, vfov_deg: VFOV_DEG }
+}

@@ -1,0 +1,476 @@
+//! The frame of filtered path tracing (Bauszat et al. 2011, Figure 1), top to bottom:
+//!
+//! 1. **guide** — one guide ray per pixel through the pixel centre; at its hit: normal,
+//!    depth, albedo, direct light (one light sample) and indirect light (1..N paths, or a
+//!    per-pixel count from adaptive sampling) into the noisy indirect map (§3.1, §3.2).
+//! 2. **filter** — the indirect map, demodulated by the albedo, is filtered with any
+//!    [`IndirectFilter`] guided by the guide rays' normal and depth (§3.3).
+//! 3. **samples** — every further eye ray of the pixel (jittered in the pixel) traces its
+//!    first hit and its direct light only.
+//! 4. **lookup** — each further eye ray takes its indirect light from the filtered map at the
+//!    most similar of its four neighbouring guide rays (§3.2, eqs. 3-5), re-modulated by its
+//!    own albedo; samples are averaged with a box filter.
+//!
+//! The same lookup on the *unfiltered* map gives the `noisy` layer at no extra tracing cost,
+//! so that `noisy = direct + indirect` and, with [`NoFilter`](crate::NoFilter),
+//! `color == noisy`.
+
+use std::time::Instant;
+
+use filtrace_core::{Image, Rgb, Vec2};
+use rayon::prelude::*;
+
+use crate::filter::{GuideLayers, IndirectFilter};
+use crate::lookup::{most_similar_guide, GuideGeometry, HitGeometry};
+use crate::source::{EyeSample, PathSource, SampleKey};
+
+/// Added to the albedo before demodulating (`E = L_ind / (albedo + eps)`) and after
+/// re-modulating, so that the round trip is exact and black surfaces do not divide by zero.
+pub const DEMODULATION_EPS: f32 = 1e-3;
+
+/// Largest accepted image side and pixel count (same limits as the renderer).
+pub const MAX_SIDE: u32 = 32768;
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Settings of the filtered pipeline.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PipelineSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Eye samples per pixel, the guide ray included (Bauszat's "pixel sampling rate").
+    pub spp: u32,
+    /// Paths estimating the indirect light at each guide ray's hit (Bauszat: 1).
+    pub indirect_paths: u32,
+    /// Frame seed; the same seed gives the same frame.
+    pub seed: u64,
+    /// Divide the indirect light by the albedo before filtering and multiply by each
+    /// sample's albedo after the lookup, so the filter does not blur textures.
+    pub demodulate_albedo: bool,
+    /// Also filter the direct light (for comparison; the paper filters the indirect only).
+    pub filter_direct: bool,
+}
+
+impl PipelineSettings {
+    /// Bauszat et al.'s setting: 1 indirect path per guide ray, 4 eye samples per pixel.
+    pub fn paper(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            spp: 4,
+            indirect_paths: 1,
+            seed: 0,
+            demodulate_albedo: true,
+            filter_direct: false,
+        }
+    }
+
+    /// The interactive setting of the CPU benchmark: 1 sample per pixel (the guide ray).
+    pub fn interactive(width: u32, height: u32) -> Self {
+        Self { spp: 1, ..Self::paper(width, height) }
+    }
+
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        if self.width == 0 || self.height == 0 {
+            return Err(PipelineError::Resolution(self.width, self.height));
+        }
+        if self.width > MAX_SIDE
+            || self.height > MAX_SIDE
+            || self.width as u64 * self.height as u64 > MAX_PIXELS
+        {
+            return Err(PipelineError::Resolution(self.width, self.height));
+        }
+        if self.spp == 0 {
+            return Err(PipelineError::ZeroSpp);
+        }
+        // The per-sample records of the supersampling pass must fit comfortably.
+        if (self.spp as u64 - 1) * self.width as u64 * self.height as u64 > 1 << 30 {
+            return Err(PipelineError::TooManySamples(self.spp));
+        }
+        Ok(())
+    }
+}
+
+/// Why a frame cannot be rendered.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PipelineError {
+    Resolution(u32, u32),
+    ZeroSpp,
+    TooManySamples(u32),
+    CountsLength { expected: usize, got: usize },
+}
+
+impl std::fmt::Display for PipelineError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Resolution(w, h) => {
+                write!(
+                    f,
+                    "resolution {w}x{h} is not supported (1..={MAX_SIDE} per side, at most 2^28 pixels)"
+                )
+            }
+            Self::ZeroSpp => write!(f, "samples per pixel must be at least 1"),
+            Self::TooManySamples(s) => {
+                write!(f, "{s} samples per pixel at this resolution need too much memory")
+            }
+            Self::CountsLength { expected, got } => {
+                write!(f, "per-pixel indirect sample counts: expected {expected} entries, got {got}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for PipelineError {}
+
+/// Milliseconds per stage of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameTimings {
+    /// Guide rays: first hit, direct light, indirect paths.
+    pub guide_ms: f64,
+    /// Filtering the indirect map (and the direct layer when asked).
+    pub filter_ms: f64,
+    /// Further eye samples: first hit and direct light.
+    pub samples_ms: f64,
+    /// Geometry-aware lookup and box reconstruction.
+    pub lookup_ms: f64,
+    pub total_ms: f64,
+}
+
+impl FrameTimings {
+    /// Tracing time (guide rays and further samples).
+    pub fn trace_ms(&self) -> f64 {
+        self.guide_ms + self.samples_ms
+    }
+    /// `(stage, ms)` pairs in frame order, for tables.
+    pub fn stages(&self) -> [(&'static str, f64); 4] {
+        [
+            ("guide", self.guide_ms),
+            ("filter", self.filter_ms),
+            ("samples", self.samples_ms),
+            ("lookup", self.lookup_ms),
+        ]
+    }
+}
+
+/// The layers of a frame (all `width x height`, linear radiance unless noted).
+#[derive(Clone, Debug)]
+pub struct FrameImages {
+    /// The final image: direct + filtered indirect (3 channels).
+    pub color: Image,
+    /// Direct + unfiltered indirect, same samples and lookup (3 channels).
+    pub noisy: Image,
+    /// Box mean of the samples' direct light (3 channels).
+    pub direct: Image,
+    /// Box mean of the samples' unfiltered indirect light (3 channels).
+    pub indirect: Image,
+    /// Box mean of the samples' filtered indirect light (3 channels).
+    pub filtered_indirect: Image,
+    /// The filtered direct layer when `filter_direct` is on (else empty).
+    pub filtered_direct: Image,
+    /// The guide rays' indirect map as filtered (demodulated when `demodulate_albedo`).
+    pub indirect_map: Image,
+    /// The map after the filter.
+    pub filtered_map: Image,
+    /// The guide rays' G-buffer (normal, depth, albedo, coverage).
+    pub guide: GuideLayers,
+}
+
+impl Default for FrameImages {
+    fn default() -> Self {
+        let e = || Image::new(0, 0, 3);
+        Self {
+            color: e(),
+            noisy: e(),
+            direct: e(),
+            indirect: e(),
+            filtered_indirect: e(),
+            filtered_direct: e(),
+            indirect_map: e(),
+            filtered_map: e(),
+            guide: GuideLayers::default(),
+        }
+    }
+}
+
+/// One rendered frame: its layers and what each stage cost.
+#[derive(Clone, Debug, Default)]
+pub struct Frame {
+    pub images: FrameImages,
+    pub timings: FrameTimings,
+    /// Further samples whose four neighbouring guide rays all escaped (no indirect light).
+    pub lookup_failures: u64,
+}
+
+/// A further eye sample kept between the samples pass and the lookup pass.
+#[derive(Clone, Copy, Debug, Default)]
+struct SampleRecord {
+    film: Vec2,
+    hit: Option<HitGeometry>,
+    albedo: Rgb,
+    direct: Rgb,
+}
+
+/// Buffers reused from frame to frame.
+#[derive(Default)]
+struct Buffers {
+    guides: GuideGeometry,
+    guide_samples: Vec<EyeSample>,
+    samples: Vec<SampleRecord>,
+    frame: Frame,
+}
+
+/// Filtered path tracing driven frame by frame (a viewer calls [`render_frame`] in its
+/// loop; buffers are kept between frames).
+///
+/// [`render_frame`]: FilteredRenderer::render_frame
+pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
+    source: S,
+    filter: F,
+    settings: PipelineSettings,
+    buf: Buffers,
+}
+
+impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
+    pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
+        settings.validate()?;
+        Ok(Self { source, filter, settings, buf: Buffers::default() })
+    }
+
+    pub fn settings(&self) -> &PipelineSettings {
+        &self.settings
+    }
+
+    /// Changes the settings (resolution, spp, seed...) for the next frame.
+    pub fn set_settings(&mut self, settings: PipelineSettings) -> Result<(), PipelineError> {
+        settings.validate()?;
+        self.settings = settings;
+        Ok(())
+    }
+
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+    pub fn filter_mut(&mut self) -> &mut F {
+        &mut self.filter
+    }
+    /// Replaces the filter for the next frame.
+    pub fn set_filter(&mut self, filter: F) {
+        self.filter = filter;
+    }
+
+    /// The last frame rendered (empty before the first).
+    pub fn last_frame(&self) -> &Frame {
+        &self.buf.frame
+    }
+
+    /// Renders a frame with `settings.indirect_paths` indirect paths at every guide ray.
+    pub fn render_frame(&mut self) -> &Frame {
+        self.render_frame_with_counts(None).expect("no per-pixel counts given")
+    }
+
+    /// Renders a frame; `indirect_counts` (row-major, one per pixel) replaces
+    /// `indirect_paths` per pixel, e.g. from adaptive sampling. 0 leaves a pixel's indirect
+    /// map entry at zero for the filter to fill from its neighbours.
+    pub fn render_frame_with_counts(
+        &mut self,
+        indirect_counts: Option<&[u32]>,
+    ) -> Result<&Frame, PipelineError> {
+        let st = self.settings.clone();
+        let (w, h) = (st.width as usize, st.height as usize);
+        let n = w * h;
+        if let Some(c) = indirect_counts {
+            if c.len() != n {
+                return Err(PipelineError::CountsLength { expected: n, got: c.len() });
+            }
+        }
+        let extra = st.spp as usize - 1;
+        let start = Instant::now();
+        let source = &self.source;
+        let buf = &mut self.buf;
+        resize_images(&mut buf.frame.images, w, h, st.filter_direct);
+
+        // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
+        let t0 = Instant::now();
+        buf.guide_samples.resize(n, EyeSample::default());
+        buf.guide_samples.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                let paths = indirect_counts.map_or(st.indirect_paths, |c| c[y * w + x]);
+                let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: st.seed };
+                *out = source.trace(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), paths);
+            }
+        });
+        store_guides(&buf.guide_samples, &mut buf.guides, &mut buf.frame.images, w, h, st.demodulate_albedo);
+        let guide_ms = ms(t0);
+
+        // 2. Filter the indirect map guided by the guide rays' normal and depth (§3.3).
+        let t1 = Instant::now();
+        {
+            let im = &mut buf.frame.images;
+            self.filter.apply(&im.indirect_map, &im.guide, &mut im.filtered_map);
+        }
+        let mut filter_ms = ms(t1);
+
+        // 3. Further eye samples, jittered in the pixel: first hit and direct light only.
+        let t2 = Instant::now();
+        buf.samples.resize(n * extra, SampleRecord::default());
+        if extra > 0 {
+            buf.samples.par_chunks_mut(w * extra).enumerate().for_each(|(y, row)| {
+                for (k, rec) in row.iter_mut().enumerate() {
+                    let (x, s) = (k / extra, (k % extra) as u32 + 1);
+                    let key = SampleKey { x: x as u32, y: y as u32, sample: s, seed: st.seed };
+                    let film = Vec2::new(x as f32, y as f32) + jitter(key);
+                    let e = source.trace(key, film, 0);
+                    *rec = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
+                }
+            });
+        }
+        let samples_ms = ms(t2);
+
+        // 4. Geometry-aware lookup (eqs. 3-5) and box reconstruction.
+        let t3 = Instant::now();
+        let failures = lookup_and_reconstruct(buf, w, extra, st.demodulate_albedo);
+        let lookup_ms = ms(t3);
+
+        // Optional: the direct light filtered too (comparison only).
+        if st.filter_direct {
+            let t4 = Instant::now();
+            let im = &mut buf.frame.images;
+            self.filter.apply(&im.direct, &im.guide, &mut im.filtered_direct);
+            let (c, fd, fi) = (&mut im.color, &im.filtered_direct, &im.filtered_indirect);
+            for ((c, d), i) in c.data_mut().iter_mut().zip(fd.data()).zip(fi.data()) {
+                *c = d + i;
+            }
+            filter_ms += ms(t4);
+        }
+
+        buf.frame.lookup_failures = failures;
+        buf.frame.timings = FrameTimings { guide_ms, filter_ms, samples_ms, lookup_ms, total_ms: ms(start) };
+        Ok(&buf.frame)
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) {
+    let fit = |img: &mut Image, c: usize| {
+        if img.width() != w || img.height() != h || img.channels() != c {
+            *img = Image::new(w, h, c);
+        }
+    };
+    for img in [&mut im.color, &mut im.noisy, &mut im.direct, &mut im.indirect, &mut im.filtered_indirect] {
+        fit(img, 3);
+    }
+    fit(&mut im.indirect_map, 3);
+    fit(&mut im.filtered_map, 3);
+    fit(&mut im.guide.normal, 3);
+    fit(&mut im.guide.albedo, 3);
+    fit(&mut im.guide.depth, 1);
+    fit(&mut im.guide.coverage, 1);
+    if filter_direct {
+        fit(&mut im.filtered_direct, 3);
+    } else {
+        im.filtered_direct = Image::new(0, 0, 3);
+    }
+}
+
+/// Writes the guide rays into the G-buffer and the (demodulated) indirect map.
+fn store_guides(
+    g: &[EyeSample],
+    guides: &mut GuideGeometry,
+    im: &mut FrameImages,
+    w: usize,
+    h: usize,
+    demod: bool,
+) {
+    guides.reset(w, h);
+    for (i, e) in g.iter().enumerate() {
+        let (x, y) = (i % w, i / w);
+        guides.hits[i] = e.hit;
+        let (n, d) = e.hit.map_or((Rgb::ZERO, 0.0), |h| (h.normal, h.depth));
+        im.guide.normal.set_rgb(x, y, n);
+        im.guide.depth.pixel_mut(x, y)[0] = d;
+        im.guide.albedo.set_rgb(x, y, e.albedo);
+        im.guide.coverage.pixel_mut(x, y)[0] = if e.hit.is_some() { 1.0 } else { 0.0 };
+        let ind = if demod { e.indirect / (e.albedo + DEMODULATION_EPS) } else { e.indirect };
+        debug_assert!(ind.is_finite(), "non-finite indirect light at guide ({x}, {y}): {ind}");
+        im.indirect_map.set_rgb(x, y, ind);
+    }
+}
+
+/// Jitter of further sample `key` inside its pixel, in `[0, 1)^2`: a hash of the key.
+fn jitter(key: SampleKey) -> Vec2 {
+    let mut h = key.seed ^ 0x243f_6a88_85a3_08d3;
+    for v in [key.x as u64, key.y as u64, key.sample as u64] {
+        h = splitmix64(h ^ v.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    }
+    let to_unit = |b: u64| (b >> 40) as f32 / (1u64 << 24) as f32;
+    Vec2::new(to_unit(h), to_unit(splitmix64(h)))
+}
+
+fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Pass 4: for each pixel, the guide sample and every further sample get direct +
+/// re-modulated indirect from the unfiltered and the filtered map; box average.
+/// Returns the number of samples whose lookup found no guide that hit.
+fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool) -> u64 {
+    let Buffers { guides, guide_samples, samples, frame, .. } = buf;
+    let im = &mut frame.images;
+    let (map, fmap) = (&im.indirect_map, &im.filtered_map);
+    let inv = 1.0 / (extra + 1) as f32;
+    let remod = |albedo: Rgb| if demod { albedo + DEMODULATION_EPS } else { Rgb::ONE };
+    let row = w * 3;
+    let failures = std::sync::atomic::AtomicU64::new(0);
+    im.color
+        .data_mut()
+        .par_chunks_mut(row)
+        .zip(im.noisy.data_mut().par_chunks_mut(row))
+        .zip(im.direct.data_mut().par_chunks_mut(row))
+        .zip(im.indirect.data_mut().par_chunks_mut(row))
+        .zip(im.filtered_indirect.data_mut().par_chunks_mut(row))
+        .enumerate()
+        .for_each(|(y, ((((color, noisy), direct), indirect), filtered))| {
+            let mut fails = 0u64;
+            for x in 0..w {
+                let own = y * w + x;
+                let g = &guide_samples[own];
+                // The guide ray takes its own map entry.
+                let m = remod(g.albedo);
+                let mut d = g.direct;
+                let mut ind = m * map_rgb(map, own);
+                let mut find = m * map_rgb(fmap, own);
+                for rec in &samples[own * extra..(own + 1) * extra] {
+                    d += rec.direct;
+                    let Some(hit) = &rec.hit else { continue };
+                    match most_similar_guide(guides, rec.film, hit) {
+                        Some(i) => {
+                            let m = remod(rec.albedo);
+                            ind += m * map_rgb(map, i);
+                            find += m * map_rgb(fmap, i);
+                        }
+                        None => fails += 1,
+                    }
+                }
+                let (d, ind, find) = (d * inv, ind * inv, find * inv);
+                let px = x * 3..x * 3 + 3;
+                direct[px.clone()].copy_from_slice(&d.to_array());
+                indirect[px.clone()].copy_from_slice(&ind.to_array());
+                filtered[px.clone()].copy_from_slice(&find.to_array());
+                noisy[px.clone()].copy_from_slice(&(d + ind).to_array());
+                color[px].copy_from_slice(&(d + find).to_array());
+            }
+            failures.fetch_add(fails, std::sync::atomic::Ordering::Relaxed);
+        });
+    failures.into_inner()
+}
+
+#[inline]
+fn map_rgb(map: &Image, i: usize) -> Rgb {
+    let p = &map.data()[i * 3..i * 3 + 3];
+    Rgb::new(p[0], p[1], p[2])
+}

@@ -1,0 +1,49 @@
+//! What the filtered pipeline needs from a path tracer, as a trait: the pipeline owns the
+//! frame (which rays, which buffers, which filter); a [`PathSource`] traces one eye ray.
+//!
+//! The implementation on filtrace's own path tracer lives in [`crate::render_source`]; the
+//! tests drive the pipeline with analytic sources.
+
+use filtrace_core::{Rgb, Vec2};
+
+use crate::lookup::HitGeometry;
+
+/// Identifies one eye sample: pixel, index of the sample in the pixel (0 = guide ray) and
+/// the frame seed. A source must return the same result for the same key (reproducible
+/// frames, Bauszat §4: "a constant seed ... makes the results reproducible").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SampleKey {
+    pub x: u32,
+    pub y: u32,
+    pub sample: u32,
+    pub seed: u64,
+}
+
+/// One traced eye ray, split as in Bauszat et al. 2011, eq. 2: `L = L_direct + L_indirect`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EyeSample {
+    /// Normal and depth at the first hit; `None` when the ray escaped.
+    pub hit: Option<HitGeometry>,
+    /// Diffuse albedo at the first hit (zero on a miss), used to demodulate the indirect light.
+    pub albedo: Rgb,
+    /// Emission seen directly, plus light arriving directly from emitters at the first hit
+    /// (one next-event sample), plus the environment for a ray that escaped.
+    pub direct: Rgb,
+    /// Outgoing indirect radiance at the first hit (light that bounced at least once before
+    /// reaching it), the mean of `indirect_paths` paths; zero when none were asked for.
+    pub indirect: Rgb,
+}
+
+/// A path tracer seen by the pipeline. `Sync`: rows of a frame are traced in parallel.
+pub trait PathSource: Sync {
+    /// Traces the eye ray of `key` through film position `film` (continuous pixel
+    /// coordinates, `(0, 0)` the top-left corner of the image) and estimates its indirect
+    /// light with `indirect_paths` paths from the first hit (0: skip, `indirect` is zero).
+    fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample;
+}
+
+impl<S: PathSource + ?Sized> PathSource for &S {
+    fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample {
+        (**self).trace(key, film, indirect_paths)
+    }
+}

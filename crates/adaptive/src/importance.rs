@@ -34,8 +34,8 @@ pub const MAX_RADIUS: usize = 10;
 pub enum PositionScale {
     /// `σ_x` in world units (as in Dammertz et al. 2010).
     World(f32),
-    /// `σ_x = k · f`, with `f` the median world-space distance between horizontally
-    /// adjacent foreground pixels (the pixel footprint), measured on the frame.
+    /// `σ_x = k · f`, with `f` the median world-space distance between horizontally or
+    /// vertically adjacent foreground pixels (the pixel footprint), measured on the frame.
     Footprint(f32),
 }
 
@@ -161,7 +161,7 @@ impl Surfels {
 }
 
 /// `σ_x` in world units for these layers: `World(s)` is `s`; `Footprint(k)` is `k`
-/// times the median distance between horizontally adjacent foreground pixels.
+/// times the median distance between adjacent (right, below) foreground pixels.
 /// Returns `None` when no such pair with a non-zero distance exists (the position
 /// weight is then switched off: every weight is 1).
 pub fn resolve_sigma_position(
@@ -181,10 +181,14 @@ fn sigma_x(s: &Surfels, params: &ImportanceParams) -> Option<f32> {
             let mut d: Vec<f32> = (0..s.height)
                 .into_par_iter()
                 .flat_map_iter(|y| {
-                    let row = &s.surf[y * s.width..(y + 1) * s.width];
-                    row.windows(2).filter_map(|w| match (w[0], w[1]) {
-                        (Some((_, a)), Some((_, b))) => Some(a.distance(b)),
-                        _ => None,
+                    let at = move |x: usize, y: usize| s.surf[y * s.width + x];
+                    (0..s.width).flat_map(move |x| {
+                        let right = (x + 1 < s.width).then(|| (at(x, y), at(x + 1, y)));
+                        let down = (y + 1 < s.height).then(|| (at(x, y), at(x, y + 1)));
+                        [right, down].into_iter().flatten().filter_map(|pair| match pair {
+                            (Some((_, a)), Some((_, b))) => Some(a.distance(b)),
+                            _ => None,
+                        })
                     })
                 })
                 .filter(|v| *v > 0.0 && v.is_finite())

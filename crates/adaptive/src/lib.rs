@@ -45,6 +45,7 @@ pub mod apportion;
 pub mod error;
 pub mod importance;
 pub mod schedule;
+pub mod synthetic;
 
 pub use apportion::{apportion, apportion_naive, Mode, SampleCounts};
 pub use error::AdaptiveError;

@@ -1,0 +1,298 @@
+//! Multi-layer float32 OpenEXR: [`ExrImage`] (named channel planes), [`write_exr`],
+//! [`read_exr`].
+
+use crate::aliases::{self, LayerAlias};
+use crate::error::IoError;
+use exr::prelude as x;
+use filtrace_core::Image;
+use std::path::{Path, PathBuf};
+
+/// One named channel plane: `width * height` values, row-major, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExrChannel {
+    pub name: String,
+    pub data: Vec<f32>,
+}
+
+/// An EXR's pixels as named f32 channel planes of one size (the data window).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExrImage {
+    width: usize,
+    height: usize,
+    channels: Vec<ExrChannel>,
+    /// The file it was read from (for error messages), if any.
+    source: Option<PathBuf>,
+    /// Notes from reading: parts skipped because their size differs, duplicate names.
+    warnings: Vec<String>,
+}
+
+impl ExrImage {
+    /// An empty image of `width x height` pixels with no channels yet.
+    pub fn new(width: usize, height: usize) -> Self {
+        Self { width, height, channels: Vec::new(), source: None, warnings: Vec::new() }
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    pub fn channels(&self) -> &[ExrChannel] {
+        &self.channels
+    }
+    pub fn channel_names(&self) -> Vec<String> {
+        self.channels.iter().map(|c| c.name.clone()).collect()
+    }
+    /// Notes collected while reading (skipped parts); empty for images built in memory.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// The plane of channel `name` (exact, case-sensitive).
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels.iter().find(|c| c.name == name).map(|c| c.data.as_slice())
+    }
+
+    /// Adds (or replaces) the channels `layer.names[k]` from channel `k` of `image`.
+    /// `layer` empty gives bare names (`R`), otherwise `layer.R`.
+    pub fn insert(&mut self, layer: &str, names: &[&str], image: &Image) -> Result<(), IoError> {
+        if image.width() != self.width || image.height() != self.height {
+            return Err(IoError::InvalidImage(format!(
+                "layer '{layer}' is {}x{}, the EXR is {}x{}",
+                image.width(),
+                image.height(),
+                self.width,
+                self.height
+            )));
+        }
+        if names.len() != image.channels() {
+            return Err(IoError::InvalidImage(format!(
+                "layer '{layer}' has {} channels but {} names were given",
+                image.channels(),
+                names.len()
+            )));
+        }
+        let c = image.channels();
+        for (k, short) in names.iter().enumerate() {
+            let name = if layer.is_empty() { short.to_string() } else { format!("{layer}.{short}") };
+            let data: Vec<f32> = image.data().chunks_exact(c).map(|p| p[k]).collect();
+            match self.channels.iter_mut().find(|ch| ch.name == name) {
+                Some(ch) => ch.data = data,
+                None => self.channels.push(ExrChannel { name, data }),
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds a raw plane (length must be `width * height`).
+    pub fn insert_channel(&mut self, name: &str, data: Vec<f32>) -> Result<(), IoError> {
+        if data.len() != self.width * self.height {
+            return Err(IoError::InvalidImage(format!(
+                "channel '{name}' has {} values, expected {}",
+                data.len(),
+                self.width * self.height
+            )));
+        }
+        self.channels.retain(|c| c.name != name);
+        self.channels.push(ExrChannel { name: name.to_string(), data });
+        Ok(())
+    }
+
+    /// The distinct channel-name prefixes (layers) in the file; `""` is the bare group.
+    pub fn layer_prefixes(&self) -> Vec<String> {
+        let mut v: Vec<String> = Vec::new();
+        for c in &self.channels {
+            let (p, _) = aliases::split_channel_name(&c.name);
+            if !v.iter().any(|q| q == p) {
+                v.push(p.to_string());
+            }
+        }
+        v
+    }
+
+    /// Looks a layer up: each name in `names` is tried in turn (first hit wins); a name
+    /// known to the alias table ([`crate::aliases`]) also finds the layer under the names
+    /// other renderers use (`layer(&["albedo"])` finds `ViewLayer.Denoising Albedo.R/G/B`).
+    /// Returns an image of the layer's channels (3 for colour-like layers, 1 for depth;
+    /// all of the group's channels for a name outside the table).
+    pub fn layer(&self, names: &[&str]) -> Option<Image> {
+        names.iter().find_map(|n| self.layer_one(n))
+    }
+
+    /// [`ExrImage::layer`], with an error that names the file and lists its channels.
+    pub fn require_layer(&self, names: &[&str]) -> Result<Image, IoError> {
+        self.layer(names).ok_or_else(|| IoError::MissingLayer {
+            path: self.source.clone().unwrap_or_else(|| PathBuf::from("<memory>")),
+            layer: names.join(" / "),
+            available: self.channel_names(),
+        })
+    }
+
+    fn layer_one(&self, name: &str) -> Option<Image> {
+        match aliases::find_alias(name) {
+            Some(alias) => self.layer_by_alias(alias),
+            None => self.layer_generic(name),
+        }
+    }
+
+    fn group(&self, prefix_alias: &str) -> Vec<(&str, &ExrChannel)> {
+        // The first prefix (in file order) that answers to the alias.
+        let prefixes = self.layer_prefixes();
+        let Some(prefix) = prefixes.iter().find(|p| aliases::prefix_matches(p, prefix_alias)) else {
+            return Vec::new();
+        };
+        self.channels
+            .iter()
+            .filter_map(|c| {
+                let (p, comp) = aliases::split_channel_name(&c.name);
+                (p == prefix).then_some((comp, c))
+            })
+            .collect()
+    }
+
+    fn layer_by_alias(&self, alias: &LayerAlias) -> Option<Image> {
+        for name in alias.names {
+            let group = self.group(name);
+            if group.is_empty() {
+                continue;
+            }
+            let sets = if name.is_empty() { &alias.components[..1] } else { alias.components };
+            for set in sets {
+                let picked: Option<Vec<&ExrChannel>> = set
+                    .iter()
+                    .map(|want| {
+                        group.iter().find(|(comp, _)| comp.eq_ignore_ascii_case(want)).map(|(_, c)| *c)
+                    })
+                    .collect();
+                if let Some(picked) = picked {
+                    return Some(self.interleave(&picked));
+                }
+            }
+        }
+        None
+    }
+
+    fn layer_generic(&self, name: &str) -> Option<Image> {
+        let mut group = self.group(name);
+        if group.is_empty() {
+            return None;
+        }
+        group.sort_by(|a, b| {
+            (aliases::generic_component_rank(a.0), a.0).cmp(&(aliases::generic_component_rank(b.0), b.0))
+        });
+        let picked: Vec<&ExrChannel> = group.into_iter().map(|(_, c)| c).collect();
+        Some(self.interleave(&picked))
+    }
+
+    fn interleave(&self, planes: &[&ExrChannel]) -> Image {
+        let c = planes.len();
+        let n = self.width * self.height;
+        let mut data = vec![0.0f32; n * c];
+        for (k, plane) in planes.iter().enumerate() {
+            for (i, v) in plane.data.iter().enumerate() {
+                data[i * c + k] = *v;
+            }
+        }
+        Image::from_vec(self.width, self.height, c, data).expect("planes are width*height long")
+    }
+}
+
+/// Writes all channels as one single-part float32 EXR (ZIP compression, scan lines),
+/// channels sorted by name as the format requires.
+pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError> {
+    let path = path.as_ref();
+    if image.width == 0 || image.height == 0 {
+        return Err(IoError::InvalidImage(format!(
+            "{}: cannot write an empty {}x{} EXR",
+            path.display(),
+            image.width,
+            image.height
+        )));
+    }
+    if image.channels.is_empty() {
+        return Err(IoError::InvalidImage(format!("{}: no channels to write", path.display())));
+    }
+    let list: x::SmallVec<[x::AnyChannel<x::FlatSamples>; 4]> = image
+        .channels
+        .iter()
+        .map(|c| x::AnyChannel::new(c.name.as_str(), x::FlatSamples::F32(c.data.clone())))
+        .collect();
+    let layer = x::Layer::new(
+        (image.width, image.height),
+        x::LayerAttributes::default(),
+        x::Encoding::SMALL_LOSSLESS,
+        x::AnyChannels::sort(list),
+    );
+    let exr = x::Image::from_layer(layer);
+    use x::WritableImage;
+    exr.write().to_file(path).map_err(|e| exr_error(path, e))
+}
+
+fn exr_error(path: &Path, e: exr::error::Error) -> IoError {
+    match e {
+        exr::error::Error::Io(source) => IoError::Io { path: path.to_path_buf(), source },
+        source => IoError::Exr { path: path.to_path_buf(), source },
+    }
+}
+
+/// Reads every flat channel of every part (largest mip level) as f32. Parts of another
+/// size than the first are skipped with a note in [`ExrImage::warnings`]; part names
+/// become prefixes (`part.R`).
+pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, IoError> {
+    let path = path.as_ref();
+    if !path.exists() {
+        return Err(IoError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
+        });
+    }
+    use x::{ReadChannels, ReadLayers};
+    let file = x::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| exr_error(path, e))?;
+    let Some(first) = file.layer_data.first() else {
+        return Err(IoError::Empty { path: path.to_path_buf() });
+    };
+    let (w, h) = (first.size.0, first.size.1);
+    let mut out = ExrImage::new(w, h);
+    out.source = Some(path.to_path_buf());
+    for layer in &file.layer_data {
+        let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
+        if layer.size.0 != w || layer.size.1 != h {
+            out.warnings.push(format!(
+                "part '{}' skipped: {}x{} differs from {w}x{h}",
+                part.as_deref().unwrap_or(""),
+                layer.size.0,
+                layer.size.1
+            ));
+            continue;
+        }
+        for ch in &layer.channel_data.list {
+            let short = ch.name.to_string();
+            let name = match &part {
+                Some(p) if !p.is_empty() => format!("{p}.{short}"),
+                _ => short,
+            };
+            let data: Vec<f32> = match &ch.sample_data {
+                x::FlatSamples::F16(v) => v.iter().map(|s| s.to_f32()).collect(),
+                x::FlatSamples::F32(v) => v.clone(),
+                x::FlatSamples::U32(v) => v.iter().map(|s| *s as f32).collect(),
+            };
+            if out.channel(&name).is_some() {
+                out.warnings.push(format!("duplicate channel '{name}' ignored"));
+                continue;
+            }
+            out.channels.push(ExrChannel { name, data });
+        }
+    }
+    if out.channels.is_empty() {
+        return Err(IoError::Empty { path: path.to_path_buf() });
+    }
+    Ok(out)
+}

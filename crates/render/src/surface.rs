@@ -1,0 +1,261 @@
+//! The surface record of a ray hit, and spawning rays from it without self-intersection.
+//!
+//! [`SurfaceInteraction::from_hit`] recomputes the hit point from the barycentrics on the
+//! world-space triangle (more accurate than `origin + t * dir` far along a ray), computes
+//! the geometric normal from the winding (`(p1 - p0) x (p2 - p0)`), interpolates the shading
+//! normal when the mesh has vertex normals (falling back to the geometric one) and the uv.
+//!
+//! Orientation: the shading normal `n_s` is first flipped into the hemisphere of the
+//! geometric normal `n_g`; then, since every BSDF in filtrace is two-sided, both are
+//! flipped together to the side of the outgoing direction `wo` ([`SurfaceInteraction::
+//! facing`]). `front_face` remembers whether the ray hit the winding's front face (used for
+//! one-sided emission).
+//!
+//! Self-intersection: spawned rays start at `p` offset along `n_g` to the side of the new
+//! direction by a conservative bound of the floating-point error of `p` (pbrt-v4 sec. 6.8.6):
+//! the barycentric interpolation `b0 p0 + b1 p1 + b2 p2` has an absolute error of at most
+//! `gamma(6) (|b0 p0| + |b1 p1| + |b2 p2|)` per component, the object-to-world transform adds
+//! `gamma(3)` times the transformed magnitude; we use `gamma(7)`-sized bounds times
+//! [`OFFSET_SAFETY`] and an absolute floor [`OFFSET_FLOOR`]. Shadow rays towards a point stop
+//! [`SHADOW_END_FRACTION`] short of it, so that they do not hit the light's own triangle.
+
+use filtrace_accel::Hit;
+use filtrace_core::{Mat3A, Ray, Vec2, Vec3};
+use filtrace_scene::{MaterialId, Scene};
+
+/// `gamma(n) = n eps / (1 - n eps)` for `eps = 2^-24` (pbrt's rounding-error bound).
+#[inline]
+pub const fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5 * n as f32;
+    e / (1.0 - e)
+}
+
+/// Multiplier on the error bound: covers the Möller-Trumbore `t` error we do not track.
+pub const OFFSET_SAFETY: f32 = 4.0;
+/// Smallest offset (in world units), for hits at the origin.
+pub const OFFSET_FLOOR: f32 = 1e-6;
+/// Shadow rays to a point end at `(1 - SHADOW_END_FRACTION)` of the distance.
+pub const SHADOW_END_FRACTION: f32 = 1e-4;
+
+/// Per-instance normal transforms, computed once per scene.
+#[derive(Clone, Debug)]
+pub struct SceneGeometry {
+    /// Inverse transpose of each instance's linear part (identity for identity transforms).
+    normal_xf: Vec<Mat3A>,
+}
+
+impl SceneGeometry {
+    pub fn new(scene: &Scene) -> Self {
+        let normal_xf = scene
+            .instances
+            .iter()
+            .map(|i| {
+                let m = i.transform.matrix3;
+                let inv = m.inverse();
+                if inv.is_finite() {
+                    inv.transpose()
+                } else {
+                    Mat3A::IDENTITY
+                }
+            })
+            .collect();
+        Self { normal_xf }
+    }
+}
+
+/// Everything the integrator needs to know about a hit.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction {
+    /// World-space position recomputed from the barycentrics.
+    pub p: Vec3,
+    /// Per-component absolute error bound of `p`.
+    pub p_error: Vec3,
+    /// Unit geometric normal, on the side of `wo`.
+    pub n_g: Vec3,
+    /// Unit shading normal, in the hemisphere of `n_g`.
+    pub n_s: Vec3,
+    /// Geometric normal from the winding, not flipped (for `pdf_area` and one-sided emission).
+    pub n_winding: Vec3,
+    /// True when the ray arrived at the front face of the winding.
+    pub front_face: bool,
+    /// Unit direction towards where the ray came from.
+    pub wo: Vec3,
+    pub uv: Vec2,
+    pub material: MaterialId,
+    pub instance: u32,
+    pub prim: u32,
+    /// Distance along the (unit-direction) ray.
+    pub t: f32,
+}
+
+impl SurfaceInteraction {
+    /// The surface at `hit` of `ray` (`ray.dir` need not be unit; `t` is rescaled to a
+    /// distance). Returns `None` for hits on degenerate triangles (zero normal).
+    pub fn from_hit(scene: &Scene, geom: &SceneGeometry, ray: &Ray, hit: &Hit) -> Option<Self> {
+        let inst = &scene.instances[hit.instance as usize];
+        let mesh = &scene.meshes[inst.mesh as usize];
+        let [i0, i1, i2] = mesh.indices[hit.prim as usize].map(|i| i as usize);
+        let xf = &inst.transform;
+        let (p0, p1, p2) = (
+            xf.transform_point3(mesh.positions[i0]),
+            xf.transform_point3(mesh.positions[i1]),
+            xf.transform_point3(mesh.positions[i2]),
+        );
+        let (b1, b2) = (hit.u, hit.v);
+        let b0 = 1.0 - b1 - b2;
+        let p = b0 * p0 + b1 * p1 + b2 * p2;
+        let p_error = (b0 * p0).abs() + (b1 * p1).abs() + (b2 * p2).abs();
+        let p_error = p_error * (gamma(7) * OFFSET_SAFETY) + Vec3::splat(OFFSET_FLOOR);
+
+        let n_winding = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        if n_winding == Vec3::ZERO || !n_winding.is_finite() {
+            return None;
+        }
+        let dir_len = ray.dir.length();
+        let wo = -ray.dir / dir_len;
+        let front_face = n_winding.dot(wo) > 0.0;
+
+        let mut n_s = if mesh.normals.len() == mesh.positions.len() {
+            let n = b0 * mesh.normals[i0] + b1 * mesh.normals[i1] + b2 * mesh.normals[i2];
+            let n = (geom.normal_xf[hit.instance as usize] * n).normalize_or_zero();
+            if n.is_finite() && n != Vec3::ZERO {
+                n
+            } else {
+                n_winding
+            }
+        } else {
+            n_winding
+        };
+        // The shading normal lives in the geometric normal's hemisphere.
+        if n_s.dot(n_winding) < 0.0 {
+            n_s = -n_s;
+        }
+        let uv = if mesh.uvs.len() == mesh.positions.len() {
+            b0 * mesh.uvs[i0] + b1 * mesh.uvs[i1] + b2 * mesh.uvs[i2]
+        } else {
+            Vec2::new(b1, b2)
+        };
+        let mut si = SurfaceInteraction {
+            p,
+            p_error,
+            n_g: n_winding,
+            n_s,
+            n_winding,
+            front_face,
+            wo,
+            uv,
+            material: scene.material_of(hit.instance, hit.prim),
+            instance: hit.instance,
+            prim: hit.prim,
+            t: hit.t * dir_len,
+        };
+        si.facing();
+        Some(si)
+    }
+
+    /// Flips `n_g` and `n_s` together to the side of `wo` (two-sided shading).
+    #[inline]
+    pub fn facing(&mut self) {
+        if self.n_g.dot(self.wo) < 0.0 {
+            self.n_g = -self.n_g;
+            self.n_s = -self.n_s;
+        }
+    }
+
+    /// The ray origin for leaving the surface in direction `w`: `p` pushed along `n_g` to the
+    /// side of `w` by the error bound projected on the normal.
+    #[inline]
+    pub fn offset_origin(&self, w: Vec3) -> Vec3 {
+        let d = self.n_g.abs().dot(self.p_error);
+        let offset = if w.dot(self.n_g) < 0.0 { -d * self.n_g } else { d * self.n_g };
+        self.p + offset
+    }
+
+    /// A ray leaving the surface in unit direction `w`.
+    #[inline]
+    pub fn spawn_ray(&self, w: Vec3) -> Ray {
+        Ray::new(self.offset_origin(w), w)
+    }
+
+    /// A shadow ray towards the light point at distance `dist` in unit direction `w`
+    /// (`dist = inf` for distant lights).
+    #[inline]
+    pub fn spawn_shadow_ray(&self, w: Vec3, dist: f32) -> Ray {
+        let t_max = if dist.is_finite() { dist * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY };
+        Ray::segment(self.offset_origin(w), w, 0.0, t_max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use filtrace_accel::SceneAccel;
+    use filtrace_core::Affine3A;
+    use filtrace_scene::{Instance, Material, Mesh};
+
+    fn quad_scene(transform: Affine3A) -> Scene {
+        let mut s = Scene::default();
+        let m = s.add_material(Material::default_grey());
+        s.meshes.push(Mesh {
+            name: "quad".into(),
+            positions: vec![
+                Vec3::new(-1.0, 0.0, -1.0),
+                Vec3::new(-1.0, 0.0, 1.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(1.0, 0.0, -1.0),
+            ],
+            normals: vec![],
+            uvs: vec![],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            material_ids: vec![m, m],
+        });
+        s.instances.push(Instance { mesh: 0, transform, material_override: None });
+        s
+    }
+
+    #[test]
+    fn hit_point_normals_and_facing() {
+        let s = quad_scene(Affine3A::IDENTITY);
+        let geom = SceneGeometry::new(&s);
+        let accel = SceneAccel::build(&s);
+        // Winding (p1-p0)x(p2-p0) = (0,0,2)x(2,0,2) = +y: front face up.
+        for (origin, dir, front) in [
+            (Vec3::new(0.2, 5.0, 0.3), Vec3::new(0.0, -2.0, 0.0), true),
+            (Vec3::new(0.2, -5.0, 0.3), Vec3::new(0.0, 1.0, 0.0), false),
+        ] {
+            let ray = Ray::new(origin, dir);
+            let hit = accel.intersect(&ray).unwrap();
+            let si = SurfaceInteraction::from_hit(&s, &geom, &ray, &hit).unwrap();
+            assert!((si.p - Vec3::new(0.2, 0.0, 0.3)).length() < 1e-6);
+            assert!((si.t - 5.0).abs() < 1e-5, "t is a distance: {}", si.t);
+            assert_eq!(si.front_face, front);
+            assert_eq!(si.n_winding, Vec3::Y);
+            assert!(si.n_g.dot(si.wo) > 0.0 && si.n_s.dot(si.n_g) > 0.0);
+            // Spawned rays leave without hitting the surface again, on both sides.
+            let up = si.spawn_ray(si.n_g);
+            assert!(accel.intersect(&up).is_none());
+            assert!(up.origin.y * si.n_g.y > 0.0);
+        }
+    }
+
+    #[test]
+    fn spawned_rays_escape_far_from_origin() {
+        // A large translation makes the rounding error of p large; grazing rays still escape.
+        let s = quad_scene(Affine3A::from_translation(Vec3::new(1e5, 2e4, -3e4)));
+        let geom = SceneGeometry::new(&s);
+        let accel = SceneAccel::build(&s);
+        let mut escaped = 0;
+        for i in 0..200 {
+            let x = -0.9 + 1.8 * (i as f32 / 200.0);
+            let target = Vec3::new(1e5 + x, 2e4, -3e4 + 0.37 * x);
+            let origin = target + Vec3::new(3.0, 7.0, -1.0);
+            let ray = Ray::new(origin, target - origin);
+            let Some(hit) = accel.intersect(&ray) else { continue };
+            let si = SurfaceInteraction::from_hit(&s, &geom, &ray, &hit).unwrap();
+            let w = Vec3::new(1.0, 0.02, 0.3).normalize(); // grazing, above the surface
+            assert!(accel.intersect(&si.spawn_ray(w)).is_none(), "self-hit at {x}");
+            escaped += 1;
+        }
+        assert!(escaped > 150);
+    }
+}

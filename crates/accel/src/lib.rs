@@ -1,13 +1,56 @@
 //! # filtrace-accel
 //!
-//! Ray queries against a [`filtrace_scene::Scene`]: closest hit and any hit (shadow rays).
+//! Ray queries against a [`filtrace_scene::Scene`]: closest hit ([`SceneAccel::intersect`])
+//! and any hit for shadow rays ([`SceneAccel::occluded`]).
 //!
-//! PLACEHOLDER: brute force over all world-space triangles, so that the renderer can be
-//! developed against the final API while the two-level SAH BVH is written. The BVH keeps
-//! exactly this API (`SceneAccel::build`, `intersect`, `occluded`, `Hit`).
+//! ## Structure
+//! A **two-level BVH**: one bottom-level BVH per mesh (BLAS) over its object-space
+//! triangles, and a top-level BVH (TLAS) over the world boxes of the instances. A ray that
+//! reaches an instance is moved into object space by the instance's inverse affine
+//! transform; the direction is *not* renormalised, so `t` keeps its meaning and the BLAS
+//! hit distance is directly the world hit distance. Moving objects only need
+//! [`SceneAccel::update_transforms`], which rebuilds the (small) top level. A scene with a
+//! single instance skips the top level altogether.
+//!
+//! Both levels are built by the same binary **binned SAH** builder ([`sah`]; MacDonald &
+//! Booth 1990, Wald 2007), then collapsed into a **4-wide BVH** whose nodes are tested
+//! with one SSE slab test per node ([`wide`]; Dammertz et al. 2008, Ize 2013). Triangles
+//! are copied into leaf order, and tested with the **watertight** algorithm of Woop,
+//! Benthin and Wald (JCGT 2013, [`triangle`]), so rays through shared edges and vertices
+//! of closed meshes never slip through.
+//!
+//! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
+//! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and
+//! [`testmesh`] generates meshes for tests and benchmarks.
+//!
+//! ```
+//! use filtrace_accel::{testmesh, SceneAccel};
+//! use filtrace_core::{Ray, Vec3};
+//! use filtrace_scene::Scene;
+//!
+//! let mut scene = Scene::default();
+//! scene.add_mesh(testmesh::subdivided_cube(4)); // the cube [-1, 1]^3
+//! let accel = SceneAccel::build(&scene);
+//! let hit = accel.intersect(&Ray::new(Vec3::new(0.2, 0.3, -5.0), Vec3::Z)).unwrap();
+//! assert!((hit.t - 4.0).abs() < 1e-5);
+//! assert!(accel.occluded(&Ray::segment(Vec3::ZERO, Vec3::X, 0.0, 2.0)));
+//! ```
 
-use filtrace_core::{Ray, Vec3};
-use filtrace_scene::Scene;
+pub mod bench;
+mod brute;
+pub mod sah;
+pub mod testmesh;
+pub mod triangle;
+mod wide;
+
+pub use brute::BruteForce;
+pub use sah::BuildParams;
+
+use filtrace_core::{Aabb, Affine3A, Ray, Vec3};
+use filtrace_scene::{Mesh, Scene};
+use rayon::prelude::*;
+use triangle::{intersect_watertight, Tri, WatertightRay};
+use wide::{Node4, RayBoxes};
 
 /// A ray-triangle hit: distance along the ray (in units of `|ray.dir|`), barycentrics of
 /// the hit (`p = (1-u-v) p0 + u p1 + v p2`), and which triangle of which instance.
@@ -20,68 +63,294 @@ pub struct Hit {
     pub prim: u32,
 }
 
-/// Acceleration structure over a whole scene.
+/// Bottom level: the wide BVH of one mesh, with its triangles copied in leaf order.
+#[derive(Clone, Debug, Default)]
+struct Blas {
+    nodes: Vec<Node4>,
+    /// Triangle corners in leaf order.
+    tris: Vec<Tri>,
+    /// Mesh triangle index of each entry of `tris`.
+    prim_ids: Vec<u32>,
+    /// Object-space bounds of all triangles.
+    bounds: Aabb,
+}
+
+impl Blas {
+    fn build(mesh: &Mesh, params: &BuildParams) -> Self {
+        // Triangles with non-finite corners can never be hit; leaving them out keeps the
+        // boxes finite (a NaN box would poison every SAH cost above it).
+        let (ids, boxes): (Vec<u32>, Vec<Aabb>) = (0..mesh.triangle_count())
+            .filter_map(|i| {
+                let t = mesh.triangle(i);
+                t.iter().all(|p| p.is_finite()).then(|| (i as u32, Aabb::from_points(t)))
+            })
+            .unzip();
+        let (root, order) = sah::build_binary(&boxes, params);
+        let Some(root) = root else { return Self::default() };
+        let nodes = wide::collapse(&root);
+        let prim_ids: Vec<u32> = order.iter().map(|&k| ids[k as usize]).collect();
+        let tris = prim_ids.iter().map(|&p| mesh.triangle(p as usize).map(|v| v.to_array())).collect();
+        Self { nodes, tris, prim_ids, bounds: root.bounds() }
+    }
+
+    /// Closest hit in object space; shortens `*t_max` and returns `(t, u, v, prim)`.
+    #[inline(always)]
+    fn intersect(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
+        let rb = RayBoxes::new(o, d);
+        let wr = WatertightRay::new(o, d);
+        let mut best = None;
+        wide::traverse(&self.nodes, &rb, t_min, t_max, |first, count, t_max| {
+            for i in first..first + count {
+                // SAFETY: leaf ranges lie inside `tris` (checked by `validate`).
+                let tri = unsafe { self.tris.get_unchecked(i as usize) };
+                if let Some((t, u, v)) = intersect_watertight(&wr, tri, t_min, *t_max) {
+                    *t_max = t;
+                    best = Some((t, u, v, i));
+                }
+            }
+            false
+        });
+        best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i as usize]))
+    }
+
+    #[inline(always)]
+    fn occluded(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+        let rb = RayBoxes::new(o, d);
+        let wr = WatertightRay::new(o, d);
+        let mut t_max = t_max;
+        wide::traverse(&self.nodes, &rb, t_min, &mut t_max, |first, count, t_max| {
+            (first..first + count).any(|i| {
+                // SAFETY: as in `intersect`.
+                let tri = unsafe { self.tris.get_unchecked(i as usize) };
+                intersect_watertight(&wr, tri, t_min, *t_max).is_some()
+            })
+        })
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        wide::validate(&self.nodes, self.tris.len(), |p| {
+            Aabb::from_points(self.tris[p].map(Vec3::from_array))
+        })
+    }
+}
+
+/// Per-instance data of the top level.
+#[derive(Clone, Debug)]
+struct InstanceRecord {
+    mesh: u32,
+    /// World-to-object transform (the inverse of the instance transform).
+    world_to_object: Affine3A,
+    /// The transform is the identity: rays are used as they are.
+    identity: bool,
+    /// World-space bounds; empty for instances that cannot be hit.
+    bounds: Aabb,
+}
+
+/// Moves a world ray into an instance's object space; `None` when the result is not a
+/// usable ray (singular or non-finite transform). Shared with [`BruteForce`].
+#[inline(always)]
+pub(crate) fn object_ray(world_to_object: &Affine3A, identity: bool, ray: &Ray) -> Option<(Vec3, Vec3)> {
+    if identity {
+        return Some((ray.origin, ray.dir));
+    }
+    let o = world_to_object.transform_point3(ray.origin);
+    let d = world_to_object.transform_vector3(ray.dir);
+    (o.is_finite() && d.is_finite() && d != Vec3::ZERO).then_some((o, d))
+}
+
+/// The inverse of an instance transform, or `None` when it is singular or not finite.
+pub(crate) fn invert_transform(m: &Affine3A) -> Option<(Affine3A, bool)> {
+    let identity = *m == Affine3A::IDENTITY;
+    let inv = m.inverse();
+    let finite = m.matrix3.is_finite()
+        && m.translation.is_finite()
+        && inv.matrix3.is_finite()
+        && inv.translation.is_finite();
+    (finite && m.matrix3.determinant() != 0.0).then_some((inv, identity))
+}
+
+/// Acceleration structure over a whole scene: a two-level wide BVH (see the crate docs).
+#[derive(Clone, Debug)]
 pub struct SceneAccel {
-    tris: Vec<([Vec3; 3], u32, u32)>,
+    /// One bottom level per mesh (empty for meshes no instance uses).
+    blas: Vec<Blas>,
+    /// One record per scene instance, in scene order.
+    instances: Vec<InstanceRecord>,
+    /// Top level over the hittable instances.
+    tlas: Vec<Node4>,
+    /// Instance indices in top-level leaf order.
+    tlas_order: Vec<u32>,
+    /// The only hittable instance, when there is exactly one: the top level is skipped.
+    single: Option<u32>,
+    triangle_count: usize,
+    params: BuildParams,
 }
 
 impl SceneAccel {
+    /// Builds with the default parameters ([`BuildParams::balanced`]).
     pub fn build(scene: &Scene) -> Self {
-        let mut tris = Vec::new();
-        for (ii, inst) in scene.instances.iter().enumerate() {
-            let mesh = &scene.meshes[inst.mesh as usize];
-            for p in 0..mesh.triangle_count() {
-                let t = mesh.triangle(p).map(|v| inst.transform.transform_point3(v));
-                tris.push((t, ii as u32, p as u32));
-            }
-        }
-        Self { tris }
+        Self::build_with(scene, &BuildParams::default())
     }
 
-    /// Closest hit with `t` in `[ray.t_min, ray.t_max]`, or `None`.
+    /// Builds both levels with `params`. Bottom levels of different meshes are built in
+    /// parallel, and large meshes build their subtrees in parallel.
+    pub fn build_with(scene: &Scene, params: &BuildParams) -> Self {
+        let mut used = vec![false; scene.meshes.len()];
+        for inst in &scene.instances {
+            if let Some(u) = used.get_mut(inst.mesh as usize) {
+                *u = true;
+            }
+        }
+        let blas: Vec<Blas> = scene
+            .meshes
+            .par_iter()
+            .zip(used.par_iter())
+            .map(|(m, &u)| if u { Blas::build(m, params) } else { Blas::default() })
+            .collect();
+        let mut accel = Self {
+            blas,
+            instances: Vec::new(),
+            tlas: Vec::new(),
+            tlas_order: Vec::new(),
+            single: None,
+            triangle_count: 0,
+            params: params.clone(),
+        };
+        accel.build_top_level(scene);
+        #[cfg(debug_assertions)]
+        if let Err(e) = accel.validate() {
+            panic!("BVH invariant broken after build: {e}");
+        }
+        accel
+    }
+
+    /// Rebuilds only the top level from the instances' current transforms. When instances
+    /// were added, removed or re-pointed at other meshes, everything is rebuilt instead.
+    pub fn update_transforms(&mut self, scene: &Scene) {
+        let same_structure = scene.instances.len() == self.instances.len()
+            && scene.meshes.len() == self.blas.len()
+            && scene.instances.iter().zip(&self.instances).all(|(a, b)| a.mesh == b.mesh);
+        if !same_structure {
+            *self = Self::build_with(scene, &self.params.clone());
+            return;
+        }
+        self.build_top_level(scene);
+        #[cfg(debug_assertions)]
+        if let Err(e) = self.validate() {
+            panic!("BVH invariant broken after update_transforms: {e}");
+        }
+    }
+
+    fn build_top_level(&mut self, scene: &Scene) {
+        self.instances = scene
+            .instances
+            .iter()
+            .map(|inst| {
+                let blas = self.blas.get(inst.mesh as usize);
+                match (blas, invert_transform(&inst.transform)) {
+                    (Some(b), Some((inv, identity))) if !b.tris.is_empty() => InstanceRecord {
+                        mesh: inst.mesh,
+                        world_to_object: inv,
+                        identity,
+                        bounds: b.bounds.transformed(&inst.transform),
+                    },
+                    _ => InstanceRecord {
+                        mesh: inst.mesh,
+                        world_to_object: Affine3A::IDENTITY,
+                        identity: true,
+                        bounds: Aabb::EMPTY,
+                    },
+                }
+            })
+            .collect();
+        self.triangle_count = scene
+            .instances
+            .iter()
+            .map(|i| scene.meshes.get(i.mesh as usize).map_or(0, |m| m.triangle_count()))
+            .sum();
+        let live: Vec<u32> = (0..self.instances.len() as u32)
+            .filter(|&i| !self.instances[i as usize].bounds.is_empty())
+            .collect();
+        let boxes: Vec<Aabb> = live.iter().map(|&i| self.instances[i as usize].bounds).collect();
+        let (root, order) =
+            sah::build_binary(&boxes, &BuildParams { max_leaf_size: 2, ..self.params.clone() });
+        self.tlas = root.as_ref().map(wide::collapse).unwrap_or_default();
+        self.tlas_order = order.iter().map(|&k| live[k as usize]).collect();
+        self.single = (live.len() == 1).then(|| live[0]);
+    }
+
+    /// Number of triangles over all instances (as [`Scene::triangle_count`]).
+    pub fn triangle_count(&self) -> usize {
+        self.triangle_count
+    }
+
+    /// Closest hit with `t` in `[ray.t_min, ray.t_max]`, or `None` (also for rays with
+    /// NaN/infinite components or a zero direction).
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }
-        let mut best: Option<Hit> = None;
         let mut t_max = ray.t_max;
-        for (tri, inst, prim) in &self.tris {
-            if let Some((t, u, v)) = intersect_triangle(ray, tri, t_max) {
-                t_max = t;
-                best = Some(Hit { t, u, v, instance: *inst, prim: *prim });
-            }
+        if let Some(i) = self.single {
+            return self.intersect_instance(i, ray, &mut t_max);
         }
+        let mut best = None;
+        let rb = RayBoxes::new(ray.origin, ray.dir);
+        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first, count, t_max| {
+            for k in first..first + count {
+                let inst = self.tlas_order[k as usize];
+                if let Some(h) = self.intersect_instance(inst, ray, t_max) {
+                    best = Some(h);
+                }
+            }
+            false
+        });
         best
     }
 
-    /// True when anything is hit with `t` in `[ray.t_min, ray.t_max]`.
+    /// True when anything is hit with `t` in `[ray.t_min, ray.t_max]` (false for invalid rays).
     pub fn occluded(&self, ray: &Ray) -> bool {
-        ray.is_valid()
-            && self.tris.iter().any(|(tri, _, _)| intersect_triangle(ray, tri, ray.t_max).is_some())
+        if !ray.is_valid() {
+            return false;
+        }
+        if let Some(i) = self.single {
+            return self.occluded_instance(i, ray);
+        }
+        let rb = RayBoxes::new(ray.origin, ray.dir);
+        let mut t_max = ray.t_max;
+        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first, count, _| {
+            (first..first + count).any(|k| self.occluded_instance(self.tlas_order[k as usize], ray))
+        })
     }
-}
 
-/// Möller-Trumbore ray-triangle test. Returns `(t, u, v)` for `t` in `[t_min, t_max]`.
-#[inline]
-pub fn intersect_triangle(ray: &Ray, tri: &[Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
-    let e1 = tri[1] - tri[0];
-    let e2 = tri[2] - tri[0];
-    let p = ray.dir.cross(e2);
-    let det = e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
+    #[inline(always)]
+    fn intersect_instance(&self, inst: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
+        let rec = &self.instances[inst as usize];
+        let (o, d) = object_ray(&rec.world_to_object, rec.identity, ray)?;
+        let (t, u, v, prim) = self.blas[rec.mesh as usize].intersect(o, d, ray.t_min, t_max)?;
+        Some(Hit { t, u, v, instance: inst, prim })
     }
-    let inv = 1.0 / det;
-    let s = ray.origin - tri[0];
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
+
+    #[inline(always)]
+    fn occluded_instance(&self, inst: u32, ray: &Ray) -> bool {
+        let rec = &self.instances[inst as usize];
+        object_ray(&rec.world_to_object, rec.identity, ray)
+            .is_some_and(|(o, d)| self.blas[rec.mesh as usize].occluded(o, d, ray.t_min, ray.t_max))
     }
-    let q = s.cross(e1);
-    let v = ray.dir.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
+
+    /// Checks the BVH invariants of both levels (every primitive in exactly one leaf,
+    /// child boxes inside their parents). Debug builds run it after every build.
+    pub fn validate(&self) -> Result<(), String> {
+        for (m, b) in self.blas.iter().enumerate() {
+            b.validate().map_err(|e| format!("mesh {m}: {e}"))?;
+        }
+        let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count();
+        if self.tlas_order.len() != live {
+            return Err(format!("top level holds {} instances, {live} are hittable", self.tlas_order.len()));
+        }
+        wide::validate(&self.tlas, self.tlas_order.len(), |k| {
+            self.instances[self.tlas_order[k] as usize].bounds
+        })
+        .map_err(|e| format!("top level: {e}"))
     }
-    let t = e2.dot(q) * inv;
-    (t >= ray.t_min && t <= t_max).then_some((t, u, v))
 }

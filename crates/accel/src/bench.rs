@@ -1,0 +1,185 @@
+//! Ray-casting throughput benchmark (the library side of `filtrace bench rays`).
+//!
+//! Three ray sets, generated deterministically from [`RayBenchOptions::seed`] before any
+//! timing starts:
+//! - **primary**: a `width x height` pinhole camera (45 degree vertical field of view)
+//!   outside the scene's bounding box, looking at its centre, one ray per pixel;
+//! - **incoherent**: `rays` rays with origins uniform in the bounding box and directions
+//!   uniform on the sphere, `t` in `[0, inf)`; cast as closest-hit and as any-hit
+//!   queries (the any-hit set uses the same rays, also with `t_max = inf`).
+//!
+//! Rays are cast in parallel with rayon (chunks of 1024 rays) on the current pool;
+//! throughput is total rays / wall time, best of `repeats` runs.
+
+use crate::testmesh::SplitMix64;
+use crate::{BuildParams, SceneAccel};
+use filtrace_core::{Ray, Vec3};
+use filtrace_scene::Scene;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+/// Options of [`ray_bench`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct RayBenchOptions {
+    /// Number of incoherent rays.
+    pub rays: usize,
+    /// Primary-ray image size.
+    pub width: usize,
+    pub height: usize,
+    /// Seed of the ray generator.
+    pub seed: u64,
+    /// Each measurement is repeated this many times; the fastest run is reported.
+    pub repeats: usize,
+    pub build: BuildParams,
+}
+
+impl Default for RayBenchOptions {
+    fn default() -> Self {
+        Self { rays: 1 << 20, width: 1024, height: 1024, seed: 7, repeats: 3, build: BuildParams::default() }
+    }
+}
+
+impl RayBenchOptions {
+    /// A small configuration for smoke tests.
+    pub fn quick() -> Self {
+        Self { rays: 1 << 14, width: 128, height: 128, repeats: 1, ..Self::default() }
+    }
+}
+
+/// Results of [`ray_bench`]; `*_mrays` are millions of rays per second over all threads.
+#[derive(Clone, Debug, Serialize)]
+pub struct RayBenchReport {
+    pub scene: String,
+    pub triangles: usize,
+    /// Size of the rayon pool the rays were cast on.
+    pub threads: usize,
+    pub build_s: f64,
+    pub primary_rays: usize,
+    pub incoherent_rays: usize,
+    pub primary_closest_mrays: f64,
+    pub incoherent_closest_mrays: f64,
+    pub incoherent_any_mrays: f64,
+    /// Fraction of rays that hit something, per query (a sanity check of the ray sets).
+    pub primary_hit_fraction: f64,
+    pub incoherent_hit_fraction: f64,
+    pub incoherent_any_hit_fraction: f64,
+}
+
+impl RayBenchReport {
+    /// A Markdown table, totals and per-thread throughput.
+    pub fn to_markdown(&self) -> String {
+        let t = self.threads.max(1) as f64;
+        let mut s = String::new();
+        s.push_str(&format!(
+            "scene `{}`: {} triangles, build {:.3} s, {} thread(s)\n\n",
+            self.scene, self.triangles, self.build_s, self.threads
+        ));
+        s.push_str(
+            "| query | rays | hit fraction | Mrays/s | Mrays/s per thread |\n|---|---:|---:|---:|---:|\n",
+        );
+        for (name, n, hit, m) in [
+            ("primary closest", self.primary_rays, self.primary_hit_fraction, self.primary_closest_mrays),
+            (
+                "incoherent closest",
+                self.incoherent_rays,
+                self.incoherent_hit_fraction,
+                self.incoherent_closest_mrays,
+            ),
+            (
+                "incoherent any",
+                self.incoherent_rays,
+                self.incoherent_any_hit_fraction,
+                self.incoherent_any_mrays,
+            ),
+        ] {
+            s.push_str(&format!("| {name} | {n} | {hit:.3} | {m:.2} | {:.2} |\n", m / t));
+        }
+        s
+    }
+}
+
+/// Pinhole-camera rays through every pixel of a `width x height` image, looking at the
+/// centre of `scene`'s bounds from outside (45 degree vertical field of view).
+pub fn primary_rays(scene: &Scene, width: usize, height: usize) -> Vec<Ray> {
+    let b = scene.bounds();
+    if b.is_empty() || width == 0 || height == 0 {
+        return Vec::new();
+    }
+    let c = b.center();
+    let r = b.bounding_radius().max(1e-6);
+    let eye = c + Vec3::new(0.5, 0.4, 1.0).normalize() * (2.4 * r);
+    let w = (c - eye).normalize();
+    let u = w.cross(Vec3::Y).normalize();
+    let v = u.cross(w);
+    let tan_half = (22.5f32).to_radians().tan();
+    let aspect = width as f32 / height as f32;
+    let mut rays = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for x in 0..width {
+            let sx = (2.0 * (x as f32 + 0.5) / width as f32 - 1.0) * tan_half * aspect;
+            let sy = (1.0 - 2.0 * (y as f32 + 0.5) / height as f32) * tan_half;
+            rays.push(Ray::new(eye, w + sx * u + sy * v));
+        }
+    }
+    rays
+}
+
+/// `n` rays with origins uniform in the scene bounds and directions uniform on the sphere.
+pub fn incoherent_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = scene.bounds();
+    if b.is_empty() {
+        return Vec::new();
+    }
+    let mut rng = SplitMix64(seed);
+    (0..n)
+        .map(|_| {
+            let o = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
+            Ray::new(o, rng.unit_vector())
+        })
+        .collect()
+}
+
+/// Casts `rays` in parallel with `query` (true = hit); returns (best Mrays/s, hit fraction).
+fn measure(rays: &[Ray], repeats: usize, query: impl Fn(&Ray) -> bool + Sync) -> (f64, f64) {
+    if rays.is_empty() {
+        return (0.0, 0.0);
+    }
+    let mut best = f64::INFINITY;
+    let mut hits = 0;
+    for _ in 0..repeats.max(1) {
+        let start = Instant::now();
+        hits = rays.par_chunks(1024).map(|c| c.iter().filter(|r| query(r)).count()).sum::<usize>();
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    (rays.len() as f64 / best / 1e6, hits as f64 / rays.len() as f64)
+}
+
+/// Builds the acceleration structure of `scene` and measures ray throughput (see the
+/// module docs for the ray sets).
+pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
+    let start = Instant::now();
+    let accel = SceneAccel::build_with(scene, &opts.build);
+    let build_s = start.elapsed().as_secs_f64();
+    let primary = primary_rays(scene, opts.width, opts.height);
+    let incoherent = incoherent_rays(scene, opts.rays, opts.seed);
+    // Warm caches and the thread pool.
+    measure(&incoherent[..incoherent.len().min(1 << 14)], 1, |r| accel.intersect(r).is_some());
+    let (p, ph) = measure(&primary, opts.repeats, |r| accel.intersect(r).is_some());
+    let (ic, ich) = measure(&incoherent, opts.repeats, |r| accel.intersect(r).is_some());
+    let (ia, iah) = measure(&incoherent, opts.repeats, |r| accel.occluded(r));
+    RayBenchReport {
+        scene: scene.name.clone(),
+        triangles: accel.triangle_count(),
+        threads: rayon::current_num_threads(),
+        build_s,
+        primary_rays: primary.len(),
+        incoherent_rays: incoherent.len(),
+        primary_closest_mrays: p,
+        incoherent_closest_mrays: ic,
+        incoherent_any_mrays: ia,
+        primary_hit_fraction: ph,
+        incoherent_hit_fraction: ich,
+        incoherent_any_hit_fraction: iah,
+    }
+}

@@ -1,0 +1,332 @@
+//! Four-wide BVH ("BVH4"/"QBVH"): nodes hold the boxes of up to four children in
+//! structure-of-arrays layout so that one SIMD box test (Williams et al., "An efficient and
+//! robust ray-box intersection algorithm", 2005, slab test) covers all four.
+//!
+//! The wide tree is obtained by collapsing the binary SAH tree (Dammertz, Hanika and Keller,
+//! "Shallow Bounding Volume Hierarchies for Fast SIMD Ray Tracing of Incoherent Rays",
+//! EGSR 2008; Wald, Benthin and Boulos, "Getting rid of packets", 2008): starting from a
+//! node's two children, the child with the largest surface area is repeatedly replaced by
+//! its own two children until there are four. Traversal visits hit children near-first
+//! and skips stack entries farther than the closest hit found so far. The slab distances
+//! are widened by `1 + 2 gamma_3` as in Ize, "Robust BVH Ray Traversal" (JCGT 2013), so
+//! rounding never culls a box the ray touches.
+
+use crate::sah::{BuildNode, MAX_DEPTH};
+use filtrace_core::{Aabb, Vec3};
+use std::mem::MaybeUninit;
+
+/// One node of the wide BVH: 4 child boxes (SoA) and 4 child references, 128 bytes.
+///
+/// `bounds[0..3]` are the children's minimum x, y, z, `bounds[3..6]` the maxima. A child
+/// with `count[i] == 0` is the inner node `child[i]`; otherwise it is a leaf holding
+/// primitives `child[i] .. child[i] + count[i]`. Unused slots hold the empty box, which
+/// no ray hits.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Node4 {
+    pub bounds: [[f32; 4]; 6],
+    pub child: [u32; 4],
+    pub count: [u32; 4],
+}
+
+impl Node4 {
+    const EMPTY: Node4 = Node4 {
+        bounds: [
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
+        child: [0; 4],
+        count: [0; 4],
+    };
+
+    pub fn child_box(&self, i: usize) -> Aabb {
+        let b = &self.bounds;
+        Aabb::new(Vec3::new(b[0][i], b[1][i], b[2][i]), Vec3::new(b[3][i], b[4][i], b[5][i]))
+    }
+
+    fn set_child_box(&mut self, i: usize, a: &Aabb) {
+        for k in 0..3 {
+            self.bounds[k][i] = a.min[k];
+            self.bounds[k + 3][i] = a.max[k];
+        }
+    }
+}
+
+/// Collapses a binary build tree into wide nodes; the root is always `nodes[0]` (an inner
+/// node, even when the whole tree is one leaf).
+pub(crate) fn collapse(root: &BuildNode) -> Vec<Node4> {
+    let mut nodes = Vec::new();
+    emit(root, &mut nodes);
+    nodes
+}
+
+fn emit(node: &BuildNode, nodes: &mut Vec<Node4>) -> u32 {
+    let index = nodes.len();
+    nodes.push(Node4::EMPTY);
+    let mut kids: Vec<&BuildNode> = Vec::with_capacity(4);
+    match node {
+        BuildNode::Leaf { .. } => kids.push(node),
+        BuildNode::Inner { children, .. } => kids.extend(children.iter()),
+    }
+    // Open the largest inner child until there are four (Dammertz et al. 2008).
+    while kids.len() < 4 {
+        let largest = kids
+            .iter()
+            .enumerate()
+            .filter(|(_, k)| matches!(k, BuildNode::Inner { .. }))
+            .max_by(|a, b| a.1.bounds().surface_area().total_cmp(&b.1.bounds().surface_area()))
+            .map(|(i, _)| i);
+        let Some(i) = largest else { break };
+        let BuildNode::Inner { children, .. } = kids.swap_remove(i) else { unreachable!() };
+        kids.extend(children.iter());
+    }
+    for (slot, kid) in kids.into_iter().enumerate() {
+        let (child, count) = match kid {
+            BuildNode::Leaf { first, count, .. } => (*first, *count),
+            BuildNode::Inner { .. } => (emit(kid, nodes), 0),
+        };
+        let n = &mut nodes[index];
+        n.set_child_box(slot, &kid.bounds());
+        n.child[slot] = child;
+        n.count[slot] = count;
+    }
+    index as u32
+}
+
+/// Per-ray constants of the box test: origin, reciprocal direction and which bound row is
+/// near on each axis.
+///
+/// A zero direction component gives an infinite reciprocal (signed like the zero). The
+/// slab distance is then `±inf` when the origin is off the plane (correct: the ray never
+/// crosses it) and `0 * inf = NaN` when the origin lies exactly in the plane; the box test
+/// orders its `min`/`max` operands so that a NaN lane is ignored, which counts such a ray
+/// as inside the slab (conservative: the triangle test decides).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayBoxes {
+    org: [f32; 3],
+    inv: [f32; 3],
+    /// Row of `Node4::bounds` holding the near plane per axis (`k` or `k + 3`).
+    near: [usize; 3],
+    /// Row holding the far plane per axis.
+    far: [usize; 3],
+}
+
+impl RayBoxes {
+    #[inline(always)]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        let mut inv = [0.0; 3];
+        let mut near = [0; 3];
+        let mut far = [0; 3];
+        for k in 0..3 {
+            inv[k] = 1.0 / dir[k];
+            (near[k], far[k]) = if inv[k] >= 0.0 { (k, k + 3) } else { (k + 3, k) };
+        }
+        Self { org: origin.to_array(), inv, near, far }
+    }
+}
+
+/// `1 + 2 gamma_3`: widening of the far slab distance (Ize 2013, sec. 3).
+const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+/// Slab test of a ray against the four child boxes: returns the hit mask (bit `i` for
+/// child `i`) and the entry distances.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE is part of the x86_64 baseline; `bounds` rows are 16-byte aligned
+    // (`Node4` is 64-byte aligned and each row is 16 bytes) and `near[k], far[k] < 6`.
+    unsafe {
+        let b = n.bounds.as_ptr() as *const f32;
+        let row = |i: usize| _mm_load_ps(b.add(4 * i));
+        let slab = |k: usize| {
+            let o = _mm_set1_ps(r.org[k]);
+            let inv = _mm_set1_ps(r.inv[k]);
+            let near = _mm_mul_ps(_mm_sub_ps(row(r.near[k]), o), inv);
+            let far = _mm_mul_ps(_mm_sub_ps(row(r.far[k]), o), inv);
+            (near, far)
+        };
+        let (nx, fx) = slab(0);
+        let (ny, fy) = slab(1);
+        let (nz, fz) = slab(2);
+        // `_mm_max_ps(a, b)` returns `b` when either is NaN: slab distances go first so
+        // that NaN lanes (origin in a slab plane, zero direction) are skipped.
+        let t_near = _mm_max_ps(nz, _mm_max_ps(ny, _mm_max_ps(nx, _mm_set1_ps(t_min))));
+        let t_far = _mm_min_ps(fz, _mm_min_ps(fy, _mm_min_ps(fx, _mm_set1_ps(t_max))));
+        let t_far = _mm_mul_ps(t_far, _mm_set1_ps(FAR_SCALE));
+        let mask = _mm_movemask_ps(_mm_cmple_ps(t_near, t_far)) as u32;
+        let mut out = [0.0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), t_near);
+        (mask, out)
+    }
+}
+
+/// Portable fallback of the slab test (LLVM vectorises these loops on most targets).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
+    let mut t_near = [t_min; 4];
+    let mut t_far = [t_max; 4];
+    for k in 0..3 {
+        let near = &n.bounds[r.near[k]];
+        let far = &n.bounds[r.far[k]];
+        for i in 0..4 {
+            let a = (near[i] - r.org[k]) * r.inv[k];
+            let b = (far[i] - r.org[k]) * r.inv[k];
+            // NaN (origin in the slab plane, zero direction) fails the comparison: skipped.
+            t_near[i] = if a > t_near[i] { a } else { t_near[i] };
+            t_far[i] = if b < t_far[i] { b } else { t_far[i] };
+        }
+    }
+    let mut mask = 0;
+    for i in 0..4 {
+        mask |= ((t_near[i] <= t_far[i] * FAR_SCALE) as u32) << i;
+    }
+    (mask, t_near)
+}
+
+#[derive(Clone, Copy)]
+struct Entry {
+    child: u32,
+    count: u32,
+    t: f32,
+}
+
+/// Traversal stack depth: each wide level pushes at most three entries.
+const STACK: usize = 3 * MAX_DEPTH + 4;
+
+/// Visits, near-first, every leaf whose box the ray `[t_min, *t_max]` touches, calling
+/// `leaf(first, count, t_max)`. The callback shortens `*t_max` on a hit (closest hit)
+/// or returns `true` to stop (any hit); `traverse` then returns `true`.
+#[inline(always)]
+pub(crate) fn traverse<F>(nodes: &[Node4], r: &RayBoxes, t_min: f32, t_max: &mut f32, mut leaf: F) -> bool
+where
+    F: FnMut(u32, u32, &mut f32) -> bool,
+{
+    if nodes.is_empty() {
+        return false;
+    }
+    let mut stack = [MaybeUninit::<Entry>::uninit(); STACK];
+    let mut sp = 0usize;
+    let mut cur = Entry { child: 0, count: 0, t: t_min };
+    loop {
+        if cur.count == 0 {
+            let node = &nodes[cur.child as usize];
+            let (mask, t_near) = box4(node, r, t_min, *t_max);
+            if mask != 0 {
+                let first = mask.trailing_zeros() as usize;
+                let rest = mask & (mask - 1);
+                let e = |i: usize| Entry { child: node.child[i], count: node.count[i], t: t_near[i] };
+                if rest == 0 {
+                    cur = e(first);
+                    continue;
+                }
+                // Sort the (2 to 4) hit children by entry distance, farthest first.
+                let mut hits = [e(first); 4];
+                let mut k = 1;
+                let mut bits = rest;
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let h = e(i);
+                    let mut j = k;
+                    while j > 0 && hits[j - 1].t < h.t {
+                        hits[j] = hits[j - 1];
+                        j -= 1;
+                    }
+                    hits[j] = h;
+                    k += 1;
+                }
+                debug_assert!(sp + k - 1 <= STACK, "BVH deeper than MAX_DEPTH");
+                for h in &hits[..k - 1] {
+                    stack[sp] = MaybeUninit::new(*h);
+                    sp += 1;
+                }
+                cur = hits[k - 1];
+                continue;
+            }
+        } else if leaf(cur.child, cur.count, t_max) {
+            return true;
+        }
+        // Pop the nearest pending entry that can still hold a closer hit.
+        loop {
+            if sp == 0 {
+                return false;
+            }
+            sp -= 1;
+            // SAFETY: entries below `sp` were written before `sp` was raised past them.
+            let e = unsafe { stack[sp].assume_init() };
+            if e.t <= *t_max {
+                cur = e;
+                break;
+            }
+        }
+    }
+}
+
+/// Checks the invariants of a wide BVH over `prim_count` primitives whose boxes are given
+/// by `prim_box`: every primitive in exactly one leaf, every child box inside its parent's
+/// slot, every node reachable once. Used by debug builds and tests.
+pub(crate) fn validate(
+    nodes: &[Node4],
+    prim_count: usize,
+    prim_box: impl Fn(usize) -> Aabb,
+) -> Result<(), String> {
+    if nodes.is_empty() {
+        return if prim_count == 0 { Ok(()) } else { Err(format!("no nodes for {prim_count} primitives")) };
+    }
+    let mut seen = vec![0u32; prim_count];
+    let mut visited = vec![false; nodes.len()];
+    let inside =
+        |inner: &Aabb, outer: &Aabb| inner.min.cmpge(outer.min).all() && inner.max.cmple(outer.max).all();
+    let mut todo = vec![(0usize, None::<Aabb>, 0usize)];
+    while let Some((ni, parent, depth)) = todo.pop() {
+        if ni >= nodes.len() {
+            return Err(format!("child index {ni} out of range"));
+        }
+        if std::mem::replace(&mut visited[ni], true) {
+            return Err(format!("node {ni} reached twice"));
+        }
+        if depth > MAX_DEPTH {
+            return Err(format!("node {ni} deeper than {MAX_DEPTH}"));
+        }
+        let n = &nodes[ni];
+        for i in 0..4 {
+            let b = n.child_box(i);
+            if b.is_empty() {
+                continue;
+            }
+            if let Some(p) = parent {
+                if !inside(&b, &p) {
+                    return Err(format!("node {ni} child {i} box {b:?} outside parent {p:?}"));
+                }
+            }
+            if n.count[i] == 0 {
+                todo.push((n.child[i] as usize, Some(b), depth + 1));
+            } else {
+                let first = n.child[i] as usize;
+                let end = first + n.count[i] as usize;
+                if end > prim_count {
+                    return Err(format!("leaf range {first}..{end} beyond {prim_count} primitives"));
+                }
+                for (p, s) in seen.iter_mut().enumerate().take(end).skip(first) {
+                    *s += 1;
+                    if !inside(&prim_box(p), &b) {
+                        return Err(format!("primitive {p} outside its leaf box"));
+                    }
+                }
+            }
+        }
+    }
+    if let Some(p) = seen.iter().position(|&s| s != 1) {
+        return Err(format!("primitive {p} referenced {} times", seen[p]));
+    }
+    if let Some(n) = visited.iter().position(|v| !v) {
+        return Err(format!("node {n} unreachable"));
+    }
+    Ok(())
+}

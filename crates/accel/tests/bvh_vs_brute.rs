@@ -1,0 +1,283 @@
+//! The BVH against the brute-force reference: same hits on random rays for every build
+//! preset, watertightness on closed meshes, degenerate input, instancing and updates.
+
+use filtrace_accel::testmesh::{self, SplitMix64};
+use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel};
+use filtrace_core::{Affine3A, Quat, Ray, Vec3};
+use filtrace_scene::{Instance, Mesh, Scene};
+use std::path::PathBuf;
+
+fn single(mesh: Mesh) -> Scene {
+    let mut s = Scene::default();
+    s.add_mesh(mesh);
+    s
+}
+
+/// Three meshes, five instances with rotations, non-uniform scales and translations;
+/// one instance shares its mesh with another.
+fn instanced_scene() -> Scene {
+    let mut s = Scene::default();
+    s.meshes.push(testmesh::displaced_sphere(10, 0.15));
+    s.meshes.push(testmesh::icosphere(2));
+    s.meshes.push(testmesh::subdivided_cube(3));
+    let place = |mesh: u32, scale: Vec3, rot: Quat, t: Vec3| Instance {
+        mesh,
+        transform: Affine3A::from_scale_rotation_translation(scale, rot, t),
+        material_override: None,
+    };
+    s.instances = vec![
+        place(0, Vec3::ONE, Quat::IDENTITY, Vec3::ZERO),
+        place(1, Vec3::new(0.5, 2.0, 1.0), Quat::from_rotation_z(0.7), Vec3::new(2.5, 0.0, 0.0)),
+        place(
+            2,
+            Vec3::new(3.0, 0.2, 1.5),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.4),
+            Vec3::new(0.0, -2.0, 0.5),
+        ),
+        place(0, Vec3::new(0.3, 0.6, 0.9), Quat::from_rotation_y(2.0), Vec3::new(-2.0, 1.0, 1.0)),
+        place(1, Vec3::splat(0.4), Quat::from_rotation_x(-1.0), Vec3::new(0.5, 0.5, -1.5)),
+    ];
+    s
+}
+
+/// Rays of every kind: from inside the bounds, from outside aimed at them, short
+/// segments, and segments starting past `t_min > 0`.
+fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = scene.bounds();
+    let (c, r) = (b.center(), b.bounding_radius());
+    let mut rng = SplitMix64(seed);
+    (0..n)
+        .map(|i| {
+            let inside = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
+            match i % 4 {
+                0 => Ray::new(inside, rng.unit_vector()),
+                1 => {
+                    let o = c + rng.unit_vector() * 2.0 * r;
+                    Ray::new(o, (inside - o) * (0.1 + 3.0 * rng.next_f32()))
+                }
+                2 => Ray::segment(inside, rng.unit_vector(), 0.0, r * rng.next_f32()),
+                _ => Ray::segment(inside, rng.unit_vector() * 2.0, 0.3 * r * rng.next_f32(), f32::INFINITY),
+            }
+        })
+        .collect()
+}
+
+/// Checks one ray: same hit/miss, same `t`, and a prim that brute force also hits at `t`.
+fn check_ray(accel: &SceneAccel, brute: &BruteForce, ray: &Ray) -> Result<(), String> {
+    let a = accel.intersect(ray);
+    let b = brute.intersect(ray);
+    match (a, b) {
+        (None, None) => {}
+        (Some(a), Some(b)) => {
+            if a.t != b.t && (a.t - b.t).abs() > 1e-6 * b.t.abs().max(1e-3) {
+                return Err(format!("t differs: bvh {a:?} brute {b:?} ray {ray:?}"));
+            }
+            if (a.instance, a.prim) != (b.instance, b.prim) {
+                // Ties: the BVH may report another triangle hit at the same distance.
+                let all = brute.all_hits(ray);
+                if !all.iter().any(|&(t, i, p)| {
+                    (i, p) == (a.instance, a.prim) && (t - a.t).abs() <= 1e-6 * a.t.abs().max(1e-3)
+                }) {
+                    return Err(format!("bvh hit {a:?} is not a hit of brute force ({b:?}) ray {ray:?}"));
+                }
+            }
+            check_hit_in_range(&a, ray)?;
+        }
+        (a, b) => return Err(format!("hit/miss differs: bvh {a:?} brute {b:?} ray {ray:?}")),
+    }
+    let occ = accel.occluded(ray);
+    if occ != b.is_some() || occ != brute.occluded(ray) {
+        return Err(format!("occluded {occ} but closest hit {b:?}, ray {ray:?}"));
+    }
+    Ok(())
+}
+
+fn check_hit_in_range(h: &Hit, ray: &Ray) -> Result<(), String> {
+    let ok = h.t >= ray.t_min && h.t <= ray.t_max && h.u >= -1e-6 && h.v >= -1e-6 && h.u + h.v <= 1.0 + 1e-5;
+    ok.then_some(()).ok_or_else(|| format!("hit out of range {h:?} for {ray:?}"))
+}
+
+fn check_scene(scene: &Scene, n: usize, seed: u64) {
+    let brute = BruteForce::build(scene);
+    for (name, params) in BuildParams::presets() {
+        let accel = SceneAccel::build_with(scene, &params);
+        accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let rays = random_rays(scene, n, seed);
+        let mut hits = 0;
+        for ray in &rays {
+            check_ray(&accel, &brute, ray).unwrap_or_else(|e| panic!("preset {name}: {e}"));
+            hits += brute.intersect(ray).is_some() as usize;
+        }
+        // The test only means something when both outcomes occur often.
+        assert!(hits > n / 10 && hits < n * 9 / 10, "{name}: {hits} of {n} rays hit");
+    }
+}
+
+#[test]
+fn single_mesh_matches_brute_force_for_every_preset() {
+    check_scene(&single(testmesh::displaced_sphere(14, 0.2)), 3000, 1);
+}
+
+#[test]
+fn instanced_scene_matches_brute_force_for_every_preset() {
+    check_scene(&instanced_scene(), 3000, 2);
+}
+
+#[test]
+fn bunny_matches_brute_force() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/bunny/bunny_lowres.obj");
+    let Ok(mesh) = testmesh::read_obj(&path) else {
+        println!("SKIPPED: {} not found", path.display());
+        return;
+    };
+    assert!(mesh.triangle_count() > 3000);
+    check_scene(&single(mesh), 3000, 3);
+}
+
+/// Rays from inside closed meshes aimed exactly at every vertex and edge midpoint (and in
+/// random directions) must all hit: a ray through a shared edge or vertex may not slip
+/// between the triangles (Woop et al. 2013).
+#[test]
+fn closed_meshes_are_watertight_from_inside() {
+    for mesh in [testmesh::subdivided_cube(6), testmesh::icosphere(3), testmesh::displaced_sphere(9, 0.1)] {
+        let scene = single(mesh.clone());
+        let accel = SceneAccel::build(&scene);
+        let brute = BruteForce::build(&scene);
+        let mut targets: Vec<Vec3> = mesh.positions.clone();
+        for [a, b, c] in &mesh.indices {
+            let (a, b, c) =
+                (mesh.positions[*a as usize], mesh.positions[*b as usize], mesh.positions[*c as usize]);
+            targets.extend([0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)]);
+        }
+        let mut rng = SplitMix64(9);
+        targets.extend((0..2000).map(|_| rng.unit_vector()));
+        for origin in [Vec3::ZERO, Vec3::new(0.1, -0.2, 0.3), Vec3::new(1.0 / 3.0, 0.25, -0.125)] {
+            for &t in &targets {
+                let ray = Ray::new(origin, t - origin);
+                assert!(accel.intersect(&ray).is_some(), "{}: ray {ray:?} escaped", mesh.name);
+                assert!(accel.occluded(&ray), "{}: shadow ray {ray:?} escaped", mesh.name);
+                assert!(brute.intersect(&ray).is_some(), "{}: brute-force ray {ray:?} escaped", mesh.name);
+            }
+        }
+    }
+}
+
+#[test]
+fn axis_aligned_rays_with_zero_direction_components() {
+    let scene = single(testmesh::subdivided_cube(4));
+    let accel = SceneAccel::build(&scene);
+    for (o, d) in [
+        (Vec3::new(0.3, 0.2, -5.0), Vec3::Z),
+        (Vec3::new(0.3, 0.2, 5.0), -Vec3::Z),
+        (Vec3::new(-5.0, 0.5, 0.5), Vec3::X),
+        (Vec3::new(0.5, 5.0, -0.5), -Vec3::Y * 3.0),
+        // On the slab boundary itself: origin exactly in the plane x = 1 of a face.
+        (Vec3::new(1.0, 0.2, -5.0), Vec3::Z),
+        (Vec3::new(-0.0, 0.0, -5.0), Vec3::new(-0.0, 0.0, 1.0)),
+    ] {
+        let h = accel.intersect(&Ray::new(o, d)).unwrap_or_else(|| panic!("missed from {o} along {d}"));
+        let p = o + h.t * d;
+        assert!((p.abs().max_element() - 1.0).abs() < 1e-5, "hit point {p} not on the cube");
+    }
+    assert!(accel.intersect(&Ray::new(Vec3::new(2.0, 0.0, -5.0), Vec3::Z)).is_none());
+}
+
+#[test]
+fn degenerate_inputs_give_no_hit_and_no_panic() {
+    let empty = SceneAccel::build(&Scene::default());
+    let ray = Ray::new(Vec3::ZERO, Vec3::X);
+    assert!(empty.intersect(&ray).is_none() && !empty.occluded(&ray));
+    assert_eq!(empty.triangle_count(), 0);
+
+    // Zero-triangle mesh, instance of a missing mesh, singular and NaN transforms.
+    let mut s = single(Mesh::default());
+    s.meshes.push(testmesh::subdivided_cube(2));
+    s.instances.push(Instance {
+        mesh: 1,
+        transform: Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)),
+        material_override: None,
+    });
+    s.instances.push(Instance {
+        mesh: 1,
+        transform: Affine3A::from_translation(Vec3::NAN),
+        material_override: None,
+    });
+    s.instances.push(Instance { mesh: 7, transform: Affine3A::IDENTITY, material_override: None });
+    s.instances.push(Instance {
+        mesh: 1,
+        transform: Affine3A::from_translation(Vec3::X * 10.0),
+        material_override: None,
+    });
+    let accel = SceneAccel::build(&s);
+    accel.validate().unwrap();
+    let h = accel.intersect(&Ray::new(Vec3::new(10.0, 0.0, -5.0), Vec3::Z)).expect("live instance");
+    assert_eq!(h.instance, 4);
+
+    // Invalid rays.
+    let cube = SceneAccel::build(&single(testmesh::subdivided_cube(2)));
+    for bad in [
+        Ray::new(Vec3::new(f32::NAN, 0.0, -5.0), Vec3::Z),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, f32::NAN, 1.0)),
+        Ray::new(Vec3::new(f32::INFINITY, 0.0, -5.0), Vec3::Z),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, 0.0, f32::INFINITY)),
+        Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::ZERO),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, f32::NAN, 10.0),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, f32::NAN),
+        Ray::segment(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 7.0, 3.0),
+    ] {
+        assert!(cube.intersect(&bad).is_none() && !cube.occluded(&bad), "{bad:?}");
+    }
+
+    // A triangle with a NaN corner is skipped, the rest of the mesh still works.
+    let mut m = testmesh::subdivided_cube(2);
+    m.positions[0] = Vec3::NAN;
+    let accel = SceneAccel::build(&single(m));
+    assert!(accel.intersect(&Ray::new(Vec3::new(0.5, 0.5, -5.0), Vec3::Z)).is_some());
+}
+
+#[test]
+fn triangle_count_counts_instanced_triangles() {
+    let s = instanced_scene();
+    assert_eq!(SceneAccel::build(&s).triangle_count(), s.triangle_count());
+}
+
+#[test]
+fn update_transforms_matches_a_fresh_build() {
+    let mut scene = instanced_scene();
+    let mut accel = SceneAccel::build(&scene);
+    for (k, inst) in scene.instances.iter_mut().enumerate() {
+        inst.transform = Affine3A::from_rotation_translation(
+            Quat::from_rotation_y(0.5 * k as f32),
+            Vec3::new(0.0, k as f32, 0.0),
+        ) * inst.transform;
+    }
+    accel.update_transforms(&scene);
+    accel.validate().unwrap();
+    let brute = BruteForce::build(&scene);
+    for ray in random_rays(&scene, 2000, 5) {
+        check_ray(&accel, &brute, &ray).unwrap();
+    }
+    // A structural change (new instance) falls back to a full rebuild.
+    scene.instances.push(Instance {
+        mesh: 2,
+        transform: Affine3A::from_translation(Vec3::Z * 6.0),
+        material_override: None,
+    });
+    accel.update_transforms(&scene);
+    assert_eq!(accel.triangle_count(), scene.triangle_count());
+    let h = accel.intersect(&Ray::new(Vec3::new(0.0, 0.0, 12.0), -Vec3::Z)).unwrap();
+    assert_eq!(h.instance, 5);
+}
+
+#[test]
+fn hit_distance_is_in_units_of_the_unnormalised_direction() {
+    let mut s = single(testmesh::subdivided_cube(2));
+    s.instances[0].transform = Affine3A::from_scale(Vec3::new(2.0, 1.0, 4.0));
+    let accel = SceneAccel::build(&s);
+    // Box [-2,2]x[-1,1]x[-4,4]; from z = -10 along 0.5 z the face z = -4 is at t = 12.
+    let h = accel.intersect(&Ray::new(Vec3::new(0.3, 0.1, -10.0), Vec3::Z * 0.5)).unwrap();
+    assert!((h.t - 12.0).abs() < 1e-4, "{h:?}");
+    assert!(!accel.occluded(&Ray::segment(Vec3::new(0.3, 0.1, -10.0), Vec3::Z * 0.5, 0.0, 11.9)));
+    assert!(accel.occluded(&Ray::segment(Vec3::new(0.3, 0.1, -10.0), Vec3::Z * 0.5, 0.0, 12.1)));
+}

@@ -42,6 +42,7 @@
 //! ```
 
 pub mod apportion;
+pub mod bench;
 pub mod error;
 pub mod importance;
 pub mod schedule;

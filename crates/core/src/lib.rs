@@ -9,6 +9,7 @@ pub mod image;
 pub mod ray;
 pub mod sampler;
 pub mod sampling;
+pub mod stats;
 
 pub use aabb::Aabb;
 pub use glam::{Affine3A, Mat3, Mat3A, Mat4, Quat, UVec2, Vec2, Vec3, Vec3A, Vec4};

@@ -1,0 +1,215 @@
+//! The edge-avoiding weighted sum shared by the À-Trous and cross-bilateral filters:
+//!
+//! `c_out(p) = sum_q h(q) w(p,q) c(q) / sum_q h(q) w(p,q)` (Dammertz et al. 2010, eqs. 2-3),
+//! `w = w_rt * w_n * w_x`, each `exp(-||a_p - a_q||^2 * inv_sigma2)` (eqs. 4-5), over a list of
+//! taps `(dx, dy, h)`. Taps outside the image are skipped (the sum renormalises), pixels of
+//! the other class (background vs surface) and invalid (non-finite) colours get weight 0.
+//!
+//! Data layout for auto-vectorisation: planar channels; the outer loop runs over taps, the
+//! inner loop over the pixels of one row, so both the centre and the neighbour values are
+//! contiguous slices and the three exponentials fold into one [`exp_neg`].
+
+use crate::gbuffer::{Guides, Planes3};
+use crate::simd::{exp_neg, has_avx2};
+use rayon::prelude::*;
+
+/// One kernel entry: offset in pixels and kernel weight `h`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Tap {
+    pub dx: isize,
+    pub dy: isize,
+    pub h: f32,
+}
+
+/// `1 / sigma^2` of each edge-stopping term; `None` switches the term off.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct RangeTerms {
+    pub inv_color: Option<f32>,
+    pub inv_normal: Option<f32>,
+    pub inv_position: Option<f32>,
+}
+
+/// Slices of one row span: centre pixels `p` and neighbour pixels `q` (same length).
+struct RowArgs<'a> {
+    pc: [&'a [f32]; 3],
+    qc: [&'a [f32]; 3],
+    pn: [&'a [f32]; 3],
+    qn: [&'a [f32]; 3],
+    px: [&'a [f32]; 3],
+    qx: [&'a [f32]; 3],
+    ps: &'a [f32],
+    qs: &'a [f32],
+    qv: &'a [f32],
+    h: f32,
+    inv: [f32; 3],
+}
+
+/// Accumulates one tap over a row span into `acc` (`[r, g, b, weight]`).
+#[inline(always)]
+fn tap_row<const WC: bool, const WN: bool, const WX: bool>(a: &RowArgs, acc: &mut [&mut [f32]; 4]) {
+    let n = a.ps.len();
+    let (pc0, pc1, pc2) = (&a.pc[0][..n], &a.pc[1][..n], &a.pc[2][..n]);
+    let (qc0, qc1, qc2) = (&a.qc[0][..n], &a.qc[1][..n], &a.qc[2][..n]);
+    let (qs, ps, qv) = (&a.qs[..n], &a.ps[..n], &a.qv[..n]);
+    let [a0, a1, a2, aw] = acc;
+    let (a0, a1, a2, aw) = (&mut a0[..n], &mut a1[..n], &mut a2[..n], &mut aw[..n]);
+    // Empty slices for switched-off terms: only indexed when the term is on.
+    let (pn, qn) =
+        if WN { (a.pn.map(|s| &s[..n]), a.qn.map(|s| &s[..n])) } else { ([&[][..]; 3], [&[][..]; 3]) };
+    let (px, qx) =
+        if WX { (a.px.map(|s| &s[..n]), a.qx.map(|s| &s[..n])) } else { ([&[][..]; 3], [&[][..]; 3]) };
+    for i in 0..n {
+        let mut e = 0.0;
+        if WC {
+            let (d0, d1, d2) = (pc0[i] - qc0[i], pc1[i] - qc1[i], pc2[i] - qc2[i]);
+            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[0];
+        }
+        if WN {
+            let (d0, d1, d2) = (pn[0][i] - qn[0][i], pn[1][i] - qn[1][i], pn[2][i] - qn[2][i]);
+            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[1];
+        }
+        if WX {
+            let (d0, d1, d2) = (px[0][i] - qx[0][i], px[1][i] - qx[1][i], px[2][i] - qx[2][i]);
+            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[2];
+        }
+        // Same class (surface/background) and a valid neighbour colour.
+        let mut w = a.h * qv[i] * (1.0 - (ps[i] - qs[i]).abs());
+        if WC || WN || WX {
+            w *= exp_neg(e);
+        }
+        a0[i] += w * qc0[i];
+        a1[i] += w * qc1[i];
+        a2[i] += w * qc2[i];
+        aw[i] += w;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn tap_row_avx2<const WC: bool, const WN: bool, const WX: bool>(
+    a: &RowArgs,
+    acc: &mut [&mut [f32]; 4],
+) {
+    tap_row::<WC, WN, WX>(a, acc)
+}
+
+#[inline(always)]
+fn tap_row_dispatch<const WC: bool, const WN: bool, const WX: bool>(
+    a: &RowArgs,
+    acc: &mut [&mut [f32]; 4],
+    avx2: bool,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is true only when `has_avx2()` detected AVX2 and FMA on this CPU.
+        unsafe { tap_row_avx2::<WC, WN, WX>(a, acc) };
+        return;
+    }
+    let _ = avx2;
+    tap_row::<WC, WN, WX>(a, acc)
+}
+
+fn tap_row_any(a: &RowArgs, acc: &mut [&mut [f32]; 4], terms: (bool, bool, bool), avx2: bool) {
+    match terms {
+        (false, false, false) => tap_row_dispatch::<false, false, false>(a, acc, avx2),
+        (true, false, false) => tap_row_dispatch::<true, false, false>(a, acc, avx2),
+        (false, true, false) => tap_row_dispatch::<false, true, false>(a, acc, avx2),
+        (false, false, true) => tap_row_dispatch::<false, false, true>(a, acc, avx2),
+        (true, true, false) => tap_row_dispatch::<true, true, false>(a, acc, avx2),
+        (true, false, true) => tap_row_dispatch::<true, false, true>(a, acc, avx2),
+        (false, true, true) => tap_row_dispatch::<false, true, true>(a, acc, avx2),
+        (true, true, true) => tap_row_dispatch::<true, true, true>(a, acc, avx2),
+    }
+}
+
+/// One edge-avoiding pass `src -> dst` over all rows (in parallel).
+///
+/// `valid`: 1 where `src` holds a valid colour (all ones when `None`).
+/// Requires `g.position` when `terms.inv_position` is set (callers check).
+pub(crate) fn edge_avoiding_pass(
+    src: &Planes3,
+    valid: Option<&[f32]>,
+    g: &Guides,
+    taps: &[Tap],
+    terms: RangeTerms,
+    dst: &mut Planes3,
+) {
+    let (w, h) = (g.width, g.height);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let ones;
+    let valid = match valid {
+        Some(v) => v,
+        None => {
+            ones = vec![1.0f32; w * h];
+            &ones[..]
+        }
+    };
+    let zeros = vec![0.0f32; w * h];
+    let pos: [&[f32]; 3] = match (&g.position, terms.inv_position) {
+        (Some(p), Some(_)) => [&p[0], &p[1], &p[2]],
+        _ => [&zeros, &zeros, &zeros],
+    };
+    let flags = (
+        terms.inv_color.is_some(),
+        terms.inv_normal.is_some(),
+        terms.inv_position.is_some() && g.position.is_some(),
+    );
+    let inv =
+        [terms.inv_color.unwrap_or(0.0), terms.inv_normal.unwrap_or(0.0), terms.inv_position.unwrap_or(0.0)];
+    let avx2 = has_avx2();
+    let [d0, d1, d2] = dst;
+    d0.par_chunks_mut(w).zip(d1.par_chunks_mut(w)).zip(d2.par_chunks_mut(w)).enumerate().for_each_init(
+        || vec![0.0f32; 4 * w],
+        |scratch, (y, ((o0, o1), o2))| {
+            scratch.fill(0.0);
+            let (s0, rest) = scratch.split_at_mut(w);
+            let (s1, rest) = rest.split_at_mut(w);
+            let (s2, sw) = rest.split_at_mut(w);
+            for t in taps {
+                let yq = y as isize + t.dy;
+                if yq < 0 || yq >= h as isize {
+                    continue;
+                }
+                let x0 = (-t.dx).max(0) as usize;
+                let x1 = (w as isize - t.dx.max(0)).max(0) as usize;
+                if x0 >= x1 {
+                    continue;
+                }
+                let p = y * w;
+                let q = (yq as usize * w) as isize + t.dx;
+                let (pr, qr) = (p + x0..p + x1, (q + x0 as isize) as usize..(q + x1 as isize) as usize);
+                let a = RowArgs {
+                    pc: [&src[0][pr.clone()], &src[1][pr.clone()], &src[2][pr.clone()]],
+                    qc: [&src[0][qr.clone()], &src[1][qr.clone()], &src[2][qr.clone()]],
+                    pn: [&g.normal[0][pr.clone()], &g.normal[1][pr.clone()], &g.normal[2][pr.clone()]],
+                    qn: [&g.normal[0][qr.clone()], &g.normal[1][qr.clone()], &g.normal[2][qr.clone()]],
+                    px: [&pos[0][pr.clone()], &pos[1][pr.clone()], &pos[2][pr.clone()]],
+                    qx: [&pos[0][qr.clone()], &pos[1][qr.clone()], &pos[2][qr.clone()]],
+                    ps: &g.surface[pr.clone()],
+                    qs: &g.surface[qr.clone()],
+                    qv: &valid[qr],
+                    h: t.h,
+                    inv,
+                };
+                let mut acc = [&mut s0[x0..x1], &mut s1[x0..x1], &mut s2[x0..x1], &mut sw[x0..x1]];
+                tap_row_any(&a, &mut acc, flags, avx2);
+            }
+            // Normalise (eq. 3); a pixel with no contributing tap keeps its own value.
+            let p = y * w;
+            for x in 0..w {
+                if sw[x] > 0.0 {
+                    let inv_w = 1.0 / sw[x];
+                    o0[x] = s0[x] * inv_w;
+                    o1[x] = s1[x] * inv_w;
+                    o2[x] = s2[x] * inv_w;
+                } else {
+                    o0[x] = src[0][p + x];
+                    o1[x] = src[1][p + x];
+                    o2[x] = src[2][p + x];
+                }
+            }
+        },
+    );
+}

@@ -1,1 +1,7 @@
-//! placeholder
+//! # filtrace-eval
+//!
+//! How good is an image? [`metrics`] compares a rendered or filtered image with a
+//! reference: MSE, relative MSE, PSNR, SSIM and LDR-FLIP, plus per-pixel error maps.
+//! Everything here sees only images, never a scene.
+
+pub mod metrics;

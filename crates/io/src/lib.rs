@@ -41,7 +41,7 @@ mod png_io;
 
 pub use error::IoError;
 pub use exr_io::{read_exr, write_exr, ExrImage};
-pub use png_io::{tonemap_srgb8, write_png, PngReport, Tonemap, TonemapParams};
+pub use png_io::{srgb_eotf, srgb_oetf, tonemap_srgb8, write_png, PngReport, Tonemap, TonemapParams};
 
 use filtrace_core::Image;
 use std::path::Path;

@@ -73,6 +73,16 @@ pub fn srgb_oetf(x: f32) -> f32 {
     }
 }
 
+/// The inverse of [`srgb_oetf`]: an sRGB-encoded value in [0, 1] back to linear.
+#[inline]
+pub fn srgb_eotf(v: f32) -> f32 {
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// What happened while writing a PNG.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PngReport {
@@ -140,6 +150,10 @@ mod tests {
         // The two pieces meet at the break point.
         let b = 0.003_130_8f32;
         assert!((12.92 * b - (1.055 * b.powf(1.0 / 2.4) - 0.055)).abs() < 1e-5);
+        for i in 0..=100 {
+            let x = i as f32 / 100.0;
+            assert!((srgb_eotf(srgb_oetf(x)) - x).abs() < 1e-5, "{x}");
+        }
     }
 
     #[test]

@@ -13,6 +13,8 @@ pub struct GuideLayers {
     pub depth: Image,
     /// Diffuse albedo at the hit, 3 channels; zero where the guide ray escaped.
     pub albedo: Image,
+    /// World-space hit position, 3 channels; zero where the guide ray escaped.
+    pub position: Image,
     /// 1 where the guide ray hit a surface, 0 where it escaped; 1 channel.
     pub coverage: Image,
 }
@@ -20,7 +22,7 @@ pub struct GuideLayers {
 impl Default for GuideLayers {
     fn default() -> Self {
         let e = |c| Image::new(0, 0, c);
-        Self { normal: e(3), depth: e(1), albedo: e(3), coverage: e(1) }
+        Self { normal: e(3), depth: e(1), albedo: e(3), position: e(3), coverage: e(1) }
     }
 }
 
@@ -29,7 +31,8 @@ pub trait IndirectFilter: Send {
     /// Short name for reports ("none", "guided", ...).
     fn label(&self) -> String;
     /// Writes the filtered `noisy` into `out` (already of the right size and channel count).
-    fn apply(&mut self, noisy: &Image, guide: &GuideLayers, out: &mut Image);
+    /// An error (bad parameters, mismatched buffers) fails the frame; `out` is then undefined.
+    fn apply(&mut self, noisy: &Image, guide: &GuideLayers, out: &mut Image) -> Result<(), String>;
 }
 
 /// Filtering off: the map passes unchanged (the unfiltered baseline; the pipeline then
@@ -41,8 +44,9 @@ impl IndirectFilter for NoFilter {
     fn label(&self) -> String {
         "none".into()
     }
-    fn apply(&mut self, noisy: &Image, _guide: &GuideLayers, out: &mut Image) {
+    fn apply(&mut self, noisy: &Image, _guide: &GuideLayers, out: &mut Image) -> Result<(), String> {
         out.data_mut().copy_from_slice(noisy.data());
+        Ok(())
     }
 }
 
@@ -50,7 +54,7 @@ impl<F: IndirectFilter + ?Sized> IndirectFilter for Box<F> {
     fn label(&self) -> String {
         (**self).label()
     }
-    fn apply(&mut self, noisy: &Image, guide: &GuideLayers, out: &mut Image) {
+    fn apply(&mut self, noisy: &Image, guide: &GuideLayers, out: &mut Image) -> Result<(), String> {
         (**self).apply(noisy, guide, out)
     }
 }

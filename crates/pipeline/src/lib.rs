@@ -10,7 +10,9 @@
 //! - [`pipeline`]: the frame, pass by pass ([`FilteredRenderer::render_frame`]).
 //! - [`lookup`]: the geometry-aware lookup (eqs. 3-5).
 //! - [`source`]: what the pipeline asks of a path tracer ([`PathSource`]).
-//! - [`filter`]: the filter slot ([`IndirectFilter`]).
+//! - [`filter`]: the filter slot ([`IndirectFilter`]); [`denoise_filter`] puts
+//!   `filtrace-denoise`'s filters in it.
+//! - [`render_source`]: [`PathSource`] on filtrace's path tracer.
 //!
 //! ```
 //! use filtrace_core::{Rgb, Vec2, Vec3};
@@ -22,20 +24,24 @@
 //!     fn trace(&self, _key: SampleKey, _film: Vec2, paths: u32) -> EyeSample {
 //!         let hit = Some(HitGeometry { normal: Vec3::Z, depth: 1.0 });
 //!         let indirect = if paths > 0 { Rgb::splat(0.25) } else { Rgb::ZERO };
-//!         EyeSample { hit, albedo: Rgb::splat(0.5), direct: Rgb::splat(0.5), indirect }
+//!         EyeSample { hit, albedo: Rgb::splat(0.5), direct: Rgb::splat(0.5), indirect, ..Default::default() }
 //!     }
 //! }
 //! let mut r = FilteredRenderer::new(Wall, NoFilter, PipelineSettings::paper(8, 8)).unwrap();
-//! let frame = r.render_frame();
+//! let frame = r.render_frame().unwrap();
 //! assert!((frame.images.color.rgb(3, 4) - Rgb::splat(0.75)).abs().max_element() < 1e-6);
 //! ```
 
+pub mod denoise_filter;
 pub mod filter;
 pub mod lookup;
 pub mod pipeline;
+pub mod render_source;
 pub mod source;
 
+pub use denoise_filter::{filter_by_name, DenoiseFilter};
 pub use filter::{GuideLayers, IndirectFilter, NoFilter};
 pub use lookup::{most_similar_guide, neighbour_guides, GuideGeometry, HitGeometry};
 pub use pipeline::{FilteredRenderer, Frame, FrameImages, FrameTimings, PipelineError, PipelineSettings};
+pub use render_source::RenderSource;
 pub use source::{EyeSample, PathSource, SampleKey};

@@ -96,7 +96,17 @@ pub enum PipelineError {
     Resolution(u32, u32),
     ZeroSpp,
     TooManySamples(u32),
-    CountsLength { expected: usize, got: usize },
+    CountsLength {
+        expected: usize,
+        got: usize,
+    },
+    /// The path source was built for another resolution.
+    SourceResolution {
+        source: (u32, u32),
+        frame: (u32, u32),
+    },
+    /// The filter refused its input (bad parameters or buffers).
+    Filter(String),
 }
 
 impl std::fmt::Display for PipelineError {
@@ -115,6 +125,12 @@ impl std::fmt::Display for PipelineError {
             Self::CountsLength { expected, got } => {
                 write!(f, "per-pixel indirect sample counts: expected {expected} entries, got {got}")
             }
+            Self::Filter(e) => write!(f, "filter: {e}"),
+            Self::SourceResolution { source, frame } => write!(
+                f,
+                "the path source renders {}x{}, the frame is {}x{}",
+                source.0, source.1, frame.0, frame.1
+            ),
         }
     }
 }
@@ -170,7 +186,7 @@ pub struct FrameImages {
     pub indirect_map: Image,
     /// The map after the filter.
     pub filtered_map: Image,
-    /// The guide rays' G-buffer (normal, depth, albedo, coverage).
+    /// The guide rays' G-buffer (normal, depth, albedo, position, coverage).
     pub guide: GuideLayers,
 }
 
@@ -231,7 +247,7 @@ pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
 
 impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
-        settings.validate()?;
+        check(&source, &settings)?;
         Ok(Self { source, filter, settings, buf: Buffers::default() })
     }
 
@@ -241,7 +257,7 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
 
     /// Changes the settings (resolution, spp, seed...) for the next frame.
     pub fn set_settings(&mut self, settings: PipelineSettings) -> Result<(), PipelineError> {
-        settings.validate()?;
+        check(&self.source, &settings)?;
         self.settings = settings;
         Ok(())
     }
@@ -263,8 +279,8 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     }
 
     /// Renders a frame with `settings.indirect_paths` indirect paths at every guide ray.
-    pub fn render_frame(&mut self) -> &Frame {
-        self.render_frame_with_counts(None).expect("no per-pixel counts given")
+    pub fn render_frame(&mut self) -> Result<&Frame, PipelineError> {
+        self.render_frame_with_counts(None)
     }
 
     /// Renders a frame; `indirect_counts` (row-major, one per pixel) replaces
@@ -305,7 +321,9 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         let t1 = Instant::now();
         {
             let im = &mut buf.frame.images;
-            self.filter.apply(&im.indirect_map, &im.guide, &mut im.filtered_map);
+            self.filter
+                .apply(&im.indirect_map, &im.guide, &mut im.filtered_map)
+                .map_err(PipelineError::Filter)?;
         }
         let mut filter_ms = ms(t1);
 
@@ -334,7 +352,9 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         if st.filter_direct {
             let t4 = Instant::now();
             let im = &mut buf.frame.images;
-            self.filter.apply(&im.direct, &im.guide, &mut im.filtered_direct);
+            self.filter
+                .apply(&im.direct, &im.guide, &mut im.filtered_direct)
+                .map_err(PipelineError::Filter)?;
             let (c, fd, fi) = (&mut im.color, &im.filtered_direct, &im.filtered_indirect);
             for ((c, d), i) in c.data_mut().iter_mut().zip(fd.data()).zip(fi.data()) {
                 *c = d + i;
@@ -345,6 +365,16 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         buf.frame.lookup_failures = failures;
         buf.frame.timings = FrameTimings { guide_ms, filter_ms, samples_ms, lookup_ms, total_ms: ms(start) };
         Ok(&buf.frame)
+    }
+}
+
+fn check<S: PathSource>(source: &S, settings: &PipelineSettings) -> Result<(), PipelineError> {
+    settings.validate()?;
+    match source.resolution() {
+        Some(r) if r != (settings.width, settings.height) => {
+            Err(PipelineError::SourceResolution { source: r, frame: (settings.width, settings.height) })
+        }
+        _ => Ok(()),
     }
 }
 
@@ -365,6 +395,7 @@ fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) 
     fit(&mut im.filtered_map, 3);
     fit(&mut im.guide.normal, 3);
     fit(&mut im.guide.albedo, 3);
+    fit(&mut im.guide.position, 3);
     fit(&mut im.guide.depth, 1);
     fit(&mut im.guide.coverage, 1);
     if filter_direct {
@@ -391,6 +422,7 @@ fn store_guides(
         im.guide.normal.set_rgb(x, y, n);
         im.guide.depth.pixel_mut(x, y)[0] = d;
         im.guide.albedo.set_rgb(x, y, e.albedo);
+        im.guide.position.set_rgb(x, y, e.position);
         im.guide.coverage.pixel_mut(x, y)[0] = if e.hit.is_some() { 1.0 } else { 0.0 };
         let ind = if demod { e.indirect / (e.albedo + DEMODULATION_EPS) } else { e.indirect };
         debug_assert!(ind.is_finite(), "non-finite indirect light at guide ({x}, {y}): {ind}");

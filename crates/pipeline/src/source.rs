@@ -4,7 +4,7 @@
 //! The implementation on filtrace's own path tracer lives in [`crate::render_source`]; the
 //! tests drive the pipeline with analytic sources.
 
-use filtrace_core::{Rgb, Vec2};
+use filtrace_core::{Rgb, Vec2, Vec3};
 
 use crate::lookup::HitGeometry;
 
@@ -26,6 +26,8 @@ pub struct EyeSample {
     pub hit: Option<HitGeometry>,
     /// Diffuse albedo at the first hit (zero on a miss), used to demodulate the indirect light.
     pub albedo: Rgb,
+    /// World-space position of the first hit (zero on a miss), for filters with a position term.
+    pub position: Vec3,
     /// Emission seen directly, plus light arriving directly from emitters at the first hit
     /// (one next-event sample), plus the environment for a ray that escaped.
     pub direct: Rgb,
@@ -40,10 +42,19 @@ pub trait PathSource: Sync {
     /// coordinates, `(0, 0)` the top-left corner of the image) and estimates its indirect
     /// light with `indirect_paths` paths from the first hit (0: skip, `indirect` is zero).
     fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample;
+
+    /// The resolution the source was built for (its camera's), if it has one; the
+    /// pipeline refuses other frame sizes.
+    fn resolution(&self) -> Option<(u32, u32)> {
+        None
+    }
 }
 
 impl<S: PathSource + ?Sized> PathSource for &S {
     fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample {
         (**self).trace(key, film, indirect_paths)
+    }
+    fn resolution(&self) -> Option<(u32, u32)> {
+        (**self).resolution()
     }
 }

@@ -37,6 +37,7 @@ impl PathSource for Edge {
             albedo: Rgb::splat(albedo),
             direct: Rgb::splat(direct * nd) + Rgb::new(0.0, 0.01 * film.y, 0.0),
             indirect,
+            ..Default::default()
         }
     }
 }
@@ -62,7 +63,7 @@ fn without_filtering_direct_plus_indirect_is_the_unfiltered_colour() {
             for filter_direct in [false, true] {
                 let st = PipelineSettings { demodulate_albedo, filter_direct, ..settings(16, 12, spp) };
                 let mut r = FilteredRenderer::new(Edge { noise: true }, NoFilter, st).unwrap();
-                let im = &r.render_frame().images;
+                let im = &r.render_frame().unwrap().images;
                 assert_eq!(im.color.count_non_finite(), 0);
                 assert!(max_abs_diff(&im.color, &im.noisy) < 1e-6);
                 assert!(max_abs_diff(&im.noisy, &sum(&im.direct, &im.indirect)) < 1e-6);
@@ -76,7 +77,7 @@ fn without_filtering_direct_plus_indirect_is_the_unfiltered_colour() {
 fn one_sample_per_pixel_is_the_guide_rays_path_traced_colour() {
     let src = Edge { noise: true };
     let mut r = FilteredRenderer::new(&src, NoFilter, settings(16, 4, 1)).unwrap();
-    let im = &r.render_frame().images;
+    let im = &r.render_frame().unwrap().images;
     for y in 0..4u32 {
         for x in 0..16u32 {
             let key = SampleKey { x, y, sample: 0, seed: 7 };
@@ -96,7 +97,7 @@ fn supersamples_never_take_indirect_light_across_a_geometric_edge() {
     // Noise-free: the direct layer is the fraction of a pixel's samples on the left plane,
     // and only left-plane samples may receive indirect light (A_LEFT each).
     let mut r = FilteredRenderer::new(Edge { noise: false }, NoFilter, settings(16, 8, 16)).unwrap();
-    let frame = r.render_frame();
+    let frame = r.render_frame().unwrap();
     assert_eq!(frame.lookup_failures, 0);
     let im = &frame.images;
     let mut edge_pixels_checked = 0;
@@ -120,16 +121,16 @@ fn supersamples_never_take_indirect_light_across_a_geometric_edge() {
 #[test]
 fn same_seed_same_frame_other_seed_other_frame_and_buffers_are_reused() {
     let mut a = FilteredRenderer::new(Edge { noise: true }, NoFilter, settings(12, 10, 4)).unwrap();
-    let first = a.render_frame().images.color.clone();
-    let again = a.render_frame().images.color.clone();
+    let first = a.render_frame().unwrap().images.color.clone();
+    let again = a.render_frame().unwrap().images.color.clone();
     assert_eq!(first, again);
     let mut b = FilteredRenderer::new(Edge { noise: true }, NoFilter, settings(12, 10, 4)).unwrap();
-    assert_eq!(b.render_frame().images.color, first);
+    assert_eq!(b.render_frame().unwrap().images.color, first);
     b.set_settings(PipelineSettings { seed: 8, ..settings(12, 10, 4) }).unwrap();
-    assert_ne!(b.render_frame().images.color, first);
+    assert_ne!(b.render_frame().unwrap().images.color, first);
     // Resizing between frames.
     b.set_settings(settings(5, 3, 2)).unwrap();
-    let f = b.render_frame();
+    let f = b.render_frame().unwrap();
     assert_eq!((f.images.color.width(), f.images.color.height()), (5, 3));
     assert!(f.timings.total_ms >= f.timings.guide_ms);
 }
@@ -140,17 +141,18 @@ impl IndirectFilter for Constant {
     fn label(&self) -> String {
         "constant".into()
     }
-    fn apply(&mut self, _noisy: &Image, guide: &GuideLayers, out: &mut Image) {
+    fn apply(&mut self, _noisy: &Image, guide: &GuideLayers, out: &mut Image) -> Result<(), String> {
         assert_eq!(guide.normal.channels(), 3);
         assert_eq!(guide.depth.channels(), 1);
         out.data_mut().fill(self.0);
+        Ok(())
     }
 }
 
 #[test]
 fn the_filtered_map_is_remodulated_by_each_samples_albedo() {
     let mut r = FilteredRenderer::new(Edge { noise: true }, Constant(2.0), settings(16, 4, 4)).unwrap();
-    let im = &r.render_frame().images;
+    let im = &r.render_frame().unwrap().images;
     // Pixel 2 lies wholly on the left plane, pixel 14 on the right.
     let eps = 1e-3;
     assert!((im.filtered_indirect.rgb(2, 1).x - 2.0 * (A_LEFT + eps)).abs() < 1e-5);
@@ -166,7 +168,7 @@ fn per_pixel_indirect_counts() {
     impl PathSource for Counting {
         fn trace(&self, _k: SampleKey, _f: Vec2, paths: u32) -> EyeSample {
             let hit = Some(HitGeometry { normal: Vec3::Z, depth: 1.0 });
-            EyeSample { hit, albedo: Rgb::ONE, direct: Rgb::ZERO, indirect: Rgb::splat(paths as f32) }
+            EyeSample { hit, albedo: Rgb::ONE, indirect: Rgb::splat(paths as f32), ..Default::default() }
         }
     }
     let st = PipelineSettings { demodulate_albedo: false, ..settings(4, 2, 1) };

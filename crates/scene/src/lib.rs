@@ -15,8 +15,10 @@
 
 pub mod builtin;
 pub mod error;
+pub mod gltf_load;
 pub mod load;
 pub mod obj;
+pub mod ply;
 pub mod texture;
 pub mod types;
 

@@ -14,6 +14,8 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     match ext.as_str() {
         "obj" => crate::obj::load_obj(path),
+        "ply" => crate::ply::load_ply(path),
+        "gltf" | "glb" => crate::gltf_load::load_gltf(path),
         _ => Err(SceneError::Unsupported {
             what: format!(
                 "{}: unknown scene file extension '{ext}' (expected obj, gltf, glb, ply or toml)",

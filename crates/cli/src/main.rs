@@ -40,6 +40,10 @@ fn main() {
         Command::Bench { which } => cmd::bench::run(which),
     };
     if let Err(e) = result {
+        // A cancelled render has written its partial output already.
+        if e.downcast_ref::<cmd::render::Interrupted>().is_some() {
+            std::process::exit(130);
+        }
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }

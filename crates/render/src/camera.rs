@@ -55,17 +55,10 @@ impl PinholeCamera {
         }
     }
 
-    /// A default camera framing `bounds` for scenes without one: looking along `-z` at the
-    /// centre from far enough that the bounding sphere fits the 45 degree vertical field of view.
+    /// The default camera for scenes without one: the scene crate's
+    /// [`filtrace_scene::default_camera_for`] (one convention for every tool).
     pub fn framing(bounds: &Aabb) -> Camera {
-        let (center, radius) = if bounds.is_empty() || !bounds.extent().is_finite() {
-            (Vec3::ZERO, 1.0)
-        } else {
-            (bounds.center(), bounds.bounding_radius().max(1e-3))
-        };
-        let vfov_deg = 45.0f32;
-        let dist = radius / (0.5 * vfov_deg.to_radians()).sin();
-        Camera { eye: center + Vec3::Z * dist, target: center, up: Vec3::Y, vfov_deg }
+        filtrace_scene::default_camera_for(*bounds)
     }
 
     pub fn width(&self) -> u32 {

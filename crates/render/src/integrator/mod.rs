@@ -106,8 +106,9 @@ pub struct Split {
 }
 
 impl Split {
-    /// Adds `l`, found at path vertex `vertex` (0 = first hit), to its component: light
-    /// reaching the eye from vertex 0 or 1 is direct, from later vertices indirect.
+    /// Adds `l`, light emitted at path vertex `vertex` (0 = first hit; for next-event
+    /// estimation at vertex `k` the light's vertex is `k + 1`), to its component: emission
+    /// seen directly (vertex 0) or after one bounce (vertex 1) is direct, the rest indirect.
     #[inline]
     pub fn add(&mut self, vertex: u32, l: Rgb) {
         if vertex <= 1 {

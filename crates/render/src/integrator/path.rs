@@ -110,8 +110,10 @@ pub fn trace_from_hit(
         let u_lobe = sampler.next_1d();
         let u_rr = sampler.next_1d();
 
-        // Next-event estimation: one light sample, MIS-weighted against BSDF sampling.
-        l.add(vertex, beta * sample_one_light(ctx, &si, &bsdf, &frame, wo, u_select, u_light));
+        // Next-event estimation: one light sample, MIS-weighted against BSDF sampling. The
+        // light reaches the eye over the vertices 0..=vertex, as emission found at vertex + 1
+        // by BSDF sampling would, so it belongs to the component of vertex + 1.
+        l.add(vertex + 1, beta * sample_one_light(ctx, &si, &bsdf, &frame, wo, u_select, u_light));
 
         // BSDF sampling for the next direction.
         let Some(bs) = bsdf.sample(wo, u_bsdf, u_lobe) else { break };

@@ -5,3 +5,8 @@
 //! Everything here sees only images, never a scene.
 
 pub mod metrics;
+
+// Experiments and their reports (pipeline/evaluation engineer).
+pub mod experiment;
+pub mod pfm;
+pub mod report;

@@ -26,7 +26,7 @@ impl fmt::Display for IoError {
         match self {
             IoError::Io { path, source } => write!(f, "{}: {source}", path.display()),
             IoError::Exr { path, source } => {
-                write!(f, "{}: cannot read/write as OpenEXR: {source}", path.display())
+                write!(f, "{}: OpenEXR error: {source}", path.display())
             }
             IoError::Png { path, source } => {
                 write!(f, "{}: cannot write PNG: {source}", path.display())

@@ -291,6 +291,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
     let out = c.output_path();
+    // First, so that a Ctrl-C during loading also stops cleanly.
+    let cancel = install_ctrlc();
 
     let t0 = Instant::now();
     let scene =
@@ -309,7 +311,6 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let renderer =
         pool.install(|| Renderer::new(scene, settings.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
 
-    let cancel = install_ctrlc();
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {}", c.scene_name()));
     let mut film = renderer.new_film();

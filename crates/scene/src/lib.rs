@@ -19,7 +19,9 @@ pub mod gltf_load;
 pub mod load;
 pub mod obj;
 pub mod ply;
+pub mod shapes;
 pub mod texture;
+pub mod toml_scene;
 pub mod types;
 
 pub use builtin::{builtin, builtin_names};

@@ -16,6 +16,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         "obj" => crate::obj::load_obj(path),
         "ply" => crate::ply::load_ply(path),
         "gltf" | "glb" => crate::gltf_load::load_gltf(path),
+        "toml" => crate::toml_scene::load_toml(path),
         _ => Err(SceneError::Unsupported {
             what: format!(
                 "{}: unknown scene file extension '{ext}' (expected obj, gltf, glb, ply or toml)",

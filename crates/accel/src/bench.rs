@@ -60,6 +60,11 @@ pub struct RayBenchReport {
     pub primary_closest_mrays: f64,
     pub incoherent_closest_mrays: f64,
     pub incoherent_any_mrays: f64,
+    /// Millions of rays per CPU-second summed over all threads (Linux; `None` elsewhere):
+    /// the per-thread speed, insensitive to other processes sharing the machine.
+    pub primary_closest_mrays_per_cpu_s: Option<f64>,
+    pub incoherent_closest_mrays_per_cpu_s: Option<f64>,
+    pub incoherent_any_mrays_per_cpu_s: Option<f64>,
     /// Fraction of rays that hit something, per query (a sanity check of the ray sets).
     pub primary_hit_fraction: f64,
     pub incoherent_hit_fraction: f64,
@@ -75,25 +80,34 @@ impl RayBenchReport {
             "scene `{}`: {} triangles, build {:.3} s, {} thread(s)\n\n",
             self.scene, self.triangles, self.build_s, self.threads
         ));
-        s.push_str(
-            "| query | rays | hit fraction | Mrays/s | Mrays/s per thread |\n|---|---:|---:|---:|---:|\n",
-        );
-        for (name, n, hit, m) in [
-            ("primary closest", self.primary_rays, self.primary_hit_fraction, self.primary_closest_mrays),
+        s.push_str("| query | rays | hit fraction | Mrays/s | Mrays/s per thread | Mrays per CPU-s |\n");
+        s.push_str("|---|---:|---:|---:|---:|---:|\n");
+        let rows = [
+            (
+                "primary closest",
+                self.primary_rays,
+                self.primary_hit_fraction,
+                self.primary_closest_mrays,
+                self.primary_closest_mrays_per_cpu_s,
+            ),
             (
                 "incoherent closest",
                 self.incoherent_rays,
                 self.incoherent_hit_fraction,
                 self.incoherent_closest_mrays,
+                self.incoherent_closest_mrays_per_cpu_s,
             ),
             (
                 "incoherent any",
                 self.incoherent_rays,
                 self.incoherent_any_hit_fraction,
                 self.incoherent_any_mrays,
+                self.incoherent_any_mrays_per_cpu_s,
             ),
-        ] {
-            s.push_str(&format!("| {name} | {n} | {hit:.3} | {m:.2} | {:.2} |\n", m / t));
+        ];
+        for (name, n, hit, m, c) in rows {
+            let c = c.map_or("n/a".to_string(), |c| format!("{c:.2}"));
+            s.push_str(&format!("| {name} | {n} | {hit:.3} | {m:.2} | {:.2} | {c} |\n", m / t));
         }
         s
     }
@@ -140,19 +154,47 @@ pub fn incoherent_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
-/// Casts `rays` in parallel with `query` (true = hit); returns (best Mrays/s, hit fraction).
-fn measure(rays: &[Ray], repeats: usize, query: impl Fn(&Ray) -> bool + Sync) -> (f64, f64) {
-    if rays.is_empty() {
-        return (0.0, 0.0);
+/// CPU time consumed so far by all threads of this process, in seconds, from
+/// `/proc/self/task/*/schedstat` (nanosecond run time; Linux only, `None` elsewhere).
+/// On a shared machine, rays per CPU-second is far steadier than rays per wall second.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let mut ns = 0u64;
+    for task in std::fs::read_dir("/proc/self/task").ok()? {
+        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
+        ns += stat.split_whitespace().next()?.parse::<u64>().ok()?;
     }
-    let mut best = f64::INFINITY;
+    Some(ns as f64 * 1e-9)
+}
+
+/// One measured query: best wall-clock and CPU throughput over the repeats.
+struct Measured {
+    mrays: f64,
+    mrays_per_cpu_s: Option<f64>,
+    hit_fraction: f64,
+}
+
+/// Casts `rays` in parallel with `query` (true = hit).
+fn measure(rays: &[Ray], repeats: usize, query: impl Fn(&Ray) -> bool + Sync) -> Measured {
+    if rays.is_empty() {
+        return Measured { mrays: 0.0, mrays_per_cpu_s: None, hit_fraction: 0.0 };
+    }
+    let (mut wall, mut cpu) = (f64::INFINITY, None::<f64>);
     let mut hits = 0;
     for _ in 0..repeats.max(1) {
+        let cpu0 = process_cpu_seconds();
         let start = Instant::now();
         hits = rays.par_chunks(1024).map(|c| c.iter().filter(|r| query(r)).count()).sum::<usize>();
-        best = best.min(start.elapsed().as_secs_f64());
+        wall = wall.min(start.elapsed().as_secs_f64());
+        if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
+            cpu = Some(cpu.map_or(b - a, |c| c.min(b - a)));
+        }
     }
-    (rays.len() as f64 / best / 1e6, hits as f64 / rays.len() as f64)
+    let n = rays.len() as f64;
+    Measured {
+        mrays: n / wall / 1e6,
+        mrays_per_cpu_s: cpu.map(|c| n / c / 1e6),
+        hit_fraction: hits as f64 / n,
+    }
 }
 
 /// Builds the acceleration structure of `scene` and measures ray throughput (see the
@@ -165,9 +207,9 @@ pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
     let incoherent = incoherent_rays(scene, opts.rays, opts.seed);
     // Warm caches and the thread pool.
     measure(&incoherent[..incoherent.len().min(1 << 14)], 1, |r| accel.intersect(r).is_some());
-    let (p, ph) = measure(&primary, opts.repeats, |r| accel.intersect(r).is_some());
-    let (ic, ich) = measure(&incoherent, opts.repeats, |r| accel.intersect(r).is_some());
-    let (ia, iah) = measure(&incoherent, opts.repeats, |r| accel.occluded(r));
+    let p = measure(&primary, opts.repeats, |r| accel.intersect(r).is_some());
+    let ic = measure(&incoherent, opts.repeats, |r| accel.intersect(r).is_some());
+    let ia = measure(&incoherent, opts.repeats, |r| accel.occluded(r));
     RayBenchReport {
         scene: scene.name.clone(),
         triangles: accel.triangle_count(),
@@ -175,11 +217,14 @@ pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
         build_s,
         primary_rays: primary.len(),
         incoherent_rays: incoherent.len(),
-        primary_closest_mrays: p,
-        incoherent_closest_mrays: ic,
-        incoherent_any_mrays: ia,
-        primary_hit_fraction: ph,
-        incoherent_hit_fraction: ich,
-        incoherent_any_hit_fraction: iah,
+        primary_closest_mrays: p.mrays,
+        incoherent_closest_mrays: ic.mrays,
+        incoherent_any_mrays: ia.mrays,
+        primary_closest_mrays_per_cpu_s: p.mrays_per_cpu_s,
+        incoherent_closest_mrays_per_cpu_s: ic.mrays_per_cpu_s,
+        incoherent_any_mrays_per_cpu_s: ia.mrays_per_cpu_s,
+        primary_hit_fraction: p.hit_fraction,
+        incoherent_hit_fraction: ic.hit_fraction,
+        incoherent_any_hit_fraction: ia.hit_fraction,
     }
 }

@@ -40,6 +40,7 @@ pub mod bench;
 mod brute;
 pub mod sah;
 pub mod testmesh;
+mod tri4;
 pub mod triangle;
 mod wide;
 
@@ -49,7 +50,8 @@ pub use sah::BuildParams;
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};
 use filtrace_scene::{Mesh, Scene};
 use rayon::prelude::*;
-use triangle::{intersect_watertight, Tri, WatertightRay};
+use tri4::Tri4;
+use triangle::WatertightRay;
 use wide::{Node4, RayBoxes};
 
 /// A ray-triangle hit: distance along the ray (in units of `|ray.dir|`), barycentrics of
@@ -67,10 +69,12 @@ pub struct Hit {
 #[derive(Clone, Debug, Default)]
 struct Blas {
     nodes: Vec<Node4>,
-    /// Triangle corners in leaf order.
-    tris: Vec<Tri>,
-    /// Mesh triangle index of each entry of `tris`.
+    /// Triangles in leaf order, four to a packet; a leaf is a range of packets.
+    packets: Vec<Tri4>,
+    /// Mesh triangle index of lane `l` of packet `p` at `4 p + l` (`u32::MAX`: unused).
     prim_ids: Vec<u32>,
+    /// Number of triangles stored (those with finite corners).
+    tri_count: usize,
     /// Object-space bounds of all triangles.
     bounds: Aabb,
 }
@@ -87,10 +91,22 @@ impl Blas {
             .unzip();
         let (root, order) = sah::build_binary(&boxes, params);
         let Some(root) = root else { return Self::default() };
-        let nodes = wide::collapse(&root);
-        let prim_ids: Vec<u32> = order.iter().map(|&k| ids[k as usize]).collect();
-        let tris = prim_ids.iter().map(|&p| mesh.triangle(p as usize).map(|v| v.to_array())).collect();
-        Self { nodes, tris, prim_ids, bounds: root.bounds() }
+        let mut packets = Vec::new();
+        let mut prim_ids = Vec::new();
+        let nodes = wide::collapse(&root, &mut |first, count| {
+            let start = packets.len() as u32;
+            let leaf = &order[first as usize..(first + count) as usize];
+            for chunk in leaf.chunks(4) {
+                let tris: Vec<_> = chunk
+                    .iter()
+                    .map(|&k| mesh.triangle(ids[k as usize] as usize).map(|v| v.to_array()))
+                    .collect();
+                packets.push(Tri4::pack(&tris));
+                prim_ids.extend((0..4).map(|l| chunk.get(l).map_or(u32::MAX, |&k| ids[k as usize])));
+            }
+            (start, packets.len() as u32 - start)
+        });
+        Self { nodes, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds() }
     }
 
     /// Closest hit in object space; shortens `*t_max` and returns `(t, u, v, prim)`.
@@ -101,16 +117,16 @@ impl Blas {
         let mut best = None;
         wide::traverse(&self.nodes, &rb, t_min, t_max, |first, count, t_max| {
             for i in first..first + count {
-                // SAFETY: leaf ranges lie inside `tris` (checked by `validate`).
-                let tri = unsafe { self.tris.get_unchecked(i as usize) };
-                if let Some((t, u, v)) = intersect_watertight(&wr, tri, t_min, *t_max) {
+                // SAFETY: leaf ranges lie inside `packets` (checked by `validate`).
+                let p = unsafe { self.packets.get_unchecked(i as usize) };
+                if let Some((t, u, v, lane)) = tri4::intersect4(&wr, p, t_min, *t_max) {
                     *t_max = t;
-                    best = Some((t, u, v, i));
+                    best = Some((t, u, v, 4 * i as usize + lane));
                 }
             }
             false
         });
-        best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i as usize]))
+        best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
 
     #[inline(always)]
@@ -121,17 +137,72 @@ impl Blas {
         wide::traverse(&self.nodes, &rb, t_min, &mut t_max, |first, count, t_max| {
             (first..first + count).any(|i| {
                 // SAFETY: as in `intersect`.
-                let tri = unsafe { self.tris.get_unchecked(i as usize) };
-                intersect_watertight(&wr, tri, t_min, *t_max).is_some()
+                let p = unsafe { self.packets.get_unchecked(i as usize) };
+                tri4::occluded4(&wr, p, t_min, *t_max)
             })
         })
     }
 
-    fn validate(&self) -> Result<(), String> {
-        wide::validate(&self.nodes, self.tris.len(), |p| {
-            Aabb::from_points(self.tris[p].map(Vec3::from_array))
-        })
+    /// Expected node visits plus packet tests of a random ray through the root box.
+    fn sah_cost(&self) -> f64 {
+        let Some(root) = self.nodes.first() else { return 0.0 };
+        let area = |n: &Node4, i: usize| n.child_box(i).surface_area() as f64;
+        let root_area: f64 =
+            (0..4).map(|i| root.child_box(i)).fold(Aabb::EMPTY, Aabb::union).surface_area() as f64;
+        let mut cost = 1.0;
+        for n in &self.nodes {
+            for i in 0..4 {
+                if n.child_box(i).is_empty() {
+                    continue;
+                }
+                let w = area(n, i) / root_area.max(f64::MIN_POSITIVE);
+                cost += w * if n.count[i] == 0 { 1.0 } else { n.count[i] as f64 };
+            }
+        }
+        cost
     }
+
+    fn validate(&self) -> Result<(), String> {
+        let packet_box = |p: usize| {
+            let pk = &self.packets[p];
+            (0..4)
+                .filter(|&l| pk.used(l))
+                .fold(Aabb::EMPTY, |b, l| b.union(Aabb::from_points(pk.lane(l).map(Vec3::from_array))))
+        };
+        wide::validate(&self.nodes, self.packets.len(), packet_box)?;
+        // Every stored triangle in exactly one lane, unused lanes marked as such.
+        let mut ids: Vec<u32> = Vec::with_capacity(self.tri_count);
+        for (i, &id) in self.prim_ids.iter().enumerate() {
+            if self.packets[i / 4].used(i % 4) != (id != u32::MAX) {
+                return Err(format!("lane {i} use does not match its id {id}"));
+            }
+            if id != u32::MAX {
+                ids.push(id);
+            }
+        }
+        ids.sort_unstable();
+        ids.dedup();
+        if ids.len() != self.tri_count {
+            return Err(format!("{} distinct triangles in leaves, {} expected", ids.len(), self.tri_count));
+        }
+        Ok(())
+    }
+}
+
+/// Size and shape of a built BVH, see [`SceneAccel::stats`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BvhStats {
+    /// Wide nodes of all bottom levels.
+    pub nodes: usize,
+    /// Leaves (wide-node children that hold triangles).
+    pub leaves: usize,
+    /// Four-triangle packets; `triangles / (4 packets)` is the lane occupancy.
+    pub packets: usize,
+    pub triangles: usize,
+    pub top_level_nodes: usize,
+    /// SAH cost of the wide bottom levels (node visits + packet tests per random ray
+    /// hitting the root box, relative to the root area), summed over meshes.
+    pub sah_cost: f64,
 }
 
 /// Per-instance data of the top level.
@@ -248,7 +319,7 @@ impl SceneAccel {
             .map(|inst| {
                 let blas = self.blas.get(inst.mesh as usize);
                 match (blas, invert_transform(&inst.transform)) {
-                    (Some(b), Some((inv, identity))) if !b.tris.is_empty() => InstanceRecord {
+                    (Some(b), Some((inv, identity))) if b.tri_count > 0 => InstanceRecord {
                         mesh: inst.mesh,
                         world_to_object: inv,
                         identity,
@@ -272,11 +343,27 @@ impl SceneAccel {
             .filter(|&i| !self.instances[i as usize].bounds.is_empty())
             .collect();
         let boxes: Vec<Aabb> = live.iter().map(|&i| self.instances[i as usize].bounds).collect();
-        let (root, order) =
-            sah::build_binary(&boxes, &BuildParams { max_leaf_size: 2, ..self.params.clone() });
-        self.tlas = root.as_ref().map(wide::collapse).unwrap_or_default();
+        let (root, order) = sah::build_binary(
+            &boxes,
+            &BuildParams { max_leaf_size: 2, leaf_block: 1, ..self.params.clone() },
+        );
+        self.tlas =
+            root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
         self.tlas_order = order.iter().map(|&k| live[k as usize]).collect();
         self.single = (live.len() == 1).then(|| live[0]);
+    }
+
+    /// Size and shape of the bottom levels, summed over meshes (for benchmarks and tuning).
+    pub fn stats(&self) -> BvhStats {
+        let mut st = BvhStats { top_level_nodes: self.tlas.len(), ..BvhStats::default() };
+        for b in &self.blas {
+            st.nodes += b.nodes.len();
+            st.packets += b.packets.len();
+            st.triangles += b.tri_count;
+            st.leaves += b.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
+            st.sah_cost += b.sah_cost();
+        }
+        st
     }
 
     /// Number of triangles over all instances (as [`Scene::triangle_count`]).

@@ -57,14 +57,16 @@ impl Node4 {
 }
 
 /// Collapses a binary build tree into wide nodes; the root is always `nodes[0]` (an inner
-/// node, even when the whole tree is one leaf).
-pub(crate) fn collapse(root: &BuildNode) -> Vec<Node4> {
+/// node, even when the whole tree is one leaf). `leaf(first, count)` stores a binary leaf
+/// (primitives `order[first..first+count]`) and returns its wide-leaf reference
+/// `(child, count)`, `count > 0`.
+pub(crate) fn collapse(root: &BuildNode, leaf: &mut impl FnMut(u32, u32) -> (u32, u32)) -> Vec<Node4> {
     let mut nodes = Vec::new();
-    emit(root, &mut nodes);
+    emit(root, &mut nodes, leaf);
     nodes
 }
 
-fn emit(node: &BuildNode, nodes: &mut Vec<Node4>) -> u32 {
+fn emit(node: &BuildNode, nodes: &mut Vec<Node4>, leaf: &mut impl FnMut(u32, u32) -> (u32, u32)) -> u32 {
     let index = nodes.len();
     nodes.push(Node4::EMPTY);
     let mut kids: Vec<&BuildNode> = Vec::with_capacity(4);
@@ -86,8 +88,8 @@ fn emit(node: &BuildNode, nodes: &mut Vec<Node4>) -> u32 {
     }
     for (slot, kid) in kids.into_iter().enumerate() {
         let (child, count) = match kid {
-            BuildNode::Leaf { first, count, .. } => (*first, *count),
-            BuildNode::Inner { .. } => (emit(kid, nodes), 0),
+            BuildNode::Leaf { first, count, .. } => leaf(*first, *count),
+            BuildNode::Inner { .. } => (emit(kid, nodes, leaf), 0),
         };
         let n = &mut nodes[index];
         n.set_child_box(slot, &kid.bounds());

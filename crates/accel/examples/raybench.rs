@@ -1,0 +1,82 @@
+//! Ray throughput from the command line, until `filtrace bench rays` is wired:
+//!
+//! `cargo run --release -p filtrace-accel --example raybench -- SCENE [--rays N] [--res WxH]
+//!  [--threads T] [--repeats K] [--json] [--write-obj PATH]`
+//!
+//! `SCENE` is a scene file or built-in name (`filtrace_scene::load_scene`) or
+//! `sphere:N` for `testmesh::displaced_sphere(N, 0.1)` (`sphere:150` has 270k triangles).
+//! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
+
+use filtrace_accel::bench::{ray_bench, RayBenchOptions};
+use filtrace_accel::testmesh;
+use filtrace_scene::Scene;
+use std::io::Write;
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut opts = RayBenchOptions::default();
+    let (mut threads, mut json, mut write_obj, mut spec) = (0usize, false, None, None);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut val = || it.next().cloned().ok_or(format!("{a} needs a value"));
+        match a.as_str() {
+            "--rays" => opts.rays = val()?.parse().map_err(|e| format!("--rays: {e}"))?,
+            "--threads" => threads = val()?.parse().map_err(|e| format!("--threads: {e}"))?,
+            "--repeats" => opts.repeats = val()?.parse().map_err(|e| format!("--repeats: {e}"))?,
+            "--res" => {
+                let v = val()?;
+                let (w, h) = v.split_once('x').ok_or("--res WxH")?;
+                opts.width = w.parse().map_err(|e| format!("--res: {e}"))?;
+                opts.height = h.parse().map_err(|e| format!("--res: {e}"))?;
+            }
+            "--bins" => opts.build.bins = val()?.parse().map_err(|e| format!("--bins: {e}"))?,
+            "--leaf" => opts.build.max_leaf_size = val()?.parse().map_err(|e| format!("--leaf: {e}"))?,
+            "--ctrav" => opts.build.traversal_cost = val()?.parse().map_err(|e| format!("--ctrav: {e}"))?,
+            "--json" => json = true,
+            "--write-obj" => write_obj = Some(val()?),
+            s => spec = Some(s.to_string()),
+        }
+    }
+    let spec = spec.ok_or("usage: raybench SCENE [options]")?;
+    let scene = if let Some(n) = spec.strip_prefix("sphere:") {
+        let n: usize = n.parse().map_err(|e| format!("sphere:N: {e}"))?;
+        let mut s = Scene { name: format!("displaced_sphere_{n}"), ..Scene::default() };
+        s.add_mesh(testmesh::displaced_sphere(n, 0.1));
+        s
+    } else {
+        filtrace_scene::load_scene(&spec).map_err(|e| e.to_string())?
+    };
+    if let Some(path) = write_obj {
+        write_world_obj(&scene, &path).map_err(|e| format!("{path}: {e}"))?;
+    }
+    if threads > 0 {
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().map_err(|e| e.to_string())?;
+    }
+    if std::env::var_os("RAYBENCH_STATS").is_some() {
+        eprintln!("{:?}", filtrace_accel::SceneAccel::build_with(&scene, &opts.build).stats());
+    }
+    let report = ray_bench(&scene, &opts);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?);
+    } else {
+        print!("{}", report.to_markdown());
+    }
+    Ok(())
+}
+
+fn write_world_obj(scene: &Scene, path: &str) -> std::io::Result<()> {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut base = 1usize;
+    for inst in &scene.instances {
+        let mesh = &scene.meshes[inst.mesh as usize];
+        for p in &mesh.positions {
+            let p = inst.transform.transform_point3(*p);
+            writeln!(f, "v {:e} {:e} {:e}", p.x, p.y, p.z)?;
+        }
+        for [a, b, c] in &mesh.indices {
+            writeln!(f, "f {} {} {}", *a as usize + base, *b as usize + base, *c as usize + base)?;
+        }
+        base += mesh.positions.len();
+    }
+    f.flush()
+}

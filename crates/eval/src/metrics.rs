@@ -11,6 +11,15 @@
 //! | [`ssim`] | luma of the displayed image | SSIM of Wang et al. 2004 (eq. 13) with an 11x11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03, L = 1, on `Y' = 0.2126 R' + 0.7152 G' + 0.0722 B'` where `R'G'B'` are the clamped sRGB-encoded values (the PNG); edges are clamped (replicated), so every pixel has a window; the mean of the SSIM map |
 //! | [`flip`] | the displayed image | LDR-ꟻLIP (Andersson et al. 2020) on the 8-bit sRGB images that [`filtrace_io::write_png`] would write, 67 pixels per degree (0.7 m from a 0.7 m wide 4K monitor), by NVIDIA's reference implementation through the `nv-flip` crate; the mean of the FLIP map, in [0, 1] |
 //!
+//! **FLIP agreement with the PyPI `flip-evaluator` 1.7** (the current reference release;
+//! `nv-flip` 0.1.2 bundles an older C++ FLIP), on the same 8-bit PNGs, `evaluate(ref, test,
+//! "LDR", applyMagma=False)`, 67.02 ppd in both:
+//!
+//! | image vs reference | flip-evaluator mean | ours | max per-pixel difference |
+//! |---|---|---|---|
+//! | Cornell 512², 16 spp vs Mitsuba 4096 spp | 0.0577870 | 0.0578003 | 1.7e-4 |
+//! | Cornell 128², 4 spp vs 64 spp (seed 3) | 0.1097336 | 0.1097540 | 2.6e-4 |
+//!
 //! **Non-finite values** (NaN, ±inf) in either image are read as 0 by every metric (as
 //! the PNG writer does) and counted in [`Metrics::nonfinite_image`] /
 //! [`Metrics::nonfinite_reference`]: a NaN pixel is an error the metric sees (it is

@@ -57,9 +57,11 @@ impl Chi2Params {
         }
     }
 
-    /// Slow-tier setting: 40 × 80 cells, 2M samples, for narrower lobes.
+    /// Slow-tier setting: 40 × 80 cells, 2M samples, for narrower lobes. 24² integration
+    /// points per cell: with 12² the grazing GGX lobe at alpha 0.04 integrated 0.1 % low
+    /// (0.97954 vs a 0.98073 sampling success rate) and failed the test.
     pub fn thorough() -> Self {
-        Chi2Params { theta_bins: 40, phi_bins: 80, samples: 2_000_000, subdivisions: 12, ..Self::standard() }
+        Chi2Params { theta_bins: 40, phi_bins: 80, samples: 2_000_000, subdivisions: 24, ..Self::standard() }
     }
 
     /// Every preset, for tests that loop over them.

@@ -18,10 +18,6 @@ use super::microfacet::{fr_conductor, reflect, TrowbridgeReitz};
 use super::BsdfSample;
 use filtrace_core::{Rgb, Vec2, Vec3};
 
-/// Below this alpha a sample is flagged `specular` (a near-mirror lobe: light sampling
-/// will almost never hit it; integrators may use that hint). f and pdf stay finite.
-pub const SPECULAR_ALPHA: f32 = 0.01;
-
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conductor {
     pub eta: Rgb,
@@ -79,7 +75,8 @@ impl Conductor {
         if !(pdf > 0.0) || !pdf.is_finite() {
             return None;
         }
-        Some(BsdfSample { wi, f: self.f(wo, wi), pdf, specular: self.distrib.alpha < SPECULAR_ALPHA })
+        // Never `specular`: alpha ≥ MIN_ALPHA keeps the lobe finite, so MIS stays valid.
+        Some(BsdfSample { wi, f: self.f(wo, wi), pdf, specular: false })
     }
 
     /// Normal-incidence Fresnel reflectance F(1): the colour of the metal, used as the

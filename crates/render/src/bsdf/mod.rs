@@ -6,8 +6,10 @@
 //! - [`SurfaceBsdf::from_material`] evaluates a material's textures at a hit (`uv`).
 //! - `f(wo, wi)`, `pdf(wo, wi)` (solid angle) are 0 unless both `wo.z > 0` and `wi.z > 0`:
 //!   two-sided surfaces are handled by the integrator flipping the frame to `wo`'s side.
-//! - `sample(wo, u, uc)` returns `wi`, `f(wo, wi)`, `pdf(wo, wi)` (never 0) and a `specular`
-//!   hint (a near-mirror lobe was sampled; f and pdf are still finite and consistent).
+//! - `sample(wo, u, uc)` returns `wi`, `f(wo, wi)`, `pdf(wo, wi)` (never 0) and `specular`.
+//!   `specular` would mark a delta lobe, for which MIS must be skipped; none of these BSDFs
+//!   has one (GGX alpha is clamped to ≥ 1e-3, so even a "mirror" has finite f and pdf and
+//!   MIS stays unbiased), so it is currently always false.
 //! - `albedo()` feeds the albedo AOV.
 //!
 //! Implementations: [`Diffuse`] (Lambert), [`Conductor`] (GGX metal, complex Fresnel),
@@ -42,8 +44,8 @@ pub struct BsdfSample {
     pub f: Rgb,
     /// `pdf(wo, wi)` in solid angle; never 0 (no sample is returned instead).
     pub pdf: f32,
-    /// A near-mirror lobe produced this sample (GGX alpha below
-    /// [`conductor::SPECULAR_ALPHA`]).
+    /// A delta lobe produced this sample: f and pdf are then Dirac weights and MIS must not
+    /// be used. Always false for the current BSDFs (all lobes are finite).
     pub specular: bool,
 }
 
@@ -125,3 +127,6 @@ impl SurfaceBsdf {
         }
     }
 }
+
+#[cfg(test)]
+pub(crate) mod tests;

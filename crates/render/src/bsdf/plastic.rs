@@ -107,12 +107,7 @@ impl Plastic {
         if !(pdf > 0.0) || !pdf.is_finite() {
             return None;
         }
-        Some(BsdfSample {
-            wi,
-            f: self.f(wo, wi),
-            pdf,
-            specular: coat && self.distrib.alpha < super::conductor::SPECULAR_ALPHA,
-        })
+        Some(BsdfSample { wi, f: self.f(wo, wi), pdf, specular: false })
     }
 
     /// The base reflectance ρ (the albedo AOV shows the textured colour, as Mitsuba's

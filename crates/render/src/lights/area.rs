@@ -40,11 +40,11 @@ impl AreaLight {
         let e2 = tri[2] - tri[0];
         let c = e1.cross(e2);
         let len = c.length();
-        let le = le.max(Rgb::ZERO);
+        // A NaN channel rejects the light (f32::max would silently turn it into 0).
         if !(len > 0.0) || !len.is_finite() || !le.is_finite() || le.max_element() <= 0.0 {
             return None;
         }
-        Some(AreaLight { p0: tri[0], e1, e2, n: c / len, area: 0.5 * len, le, two_sided })
+        Some(AreaLight { p0: tri[0], e1, e2, n: c / len, area: 0.5 * len, le: le.max(Rgb::ZERO), two_sided })
     }
 
     /// Emitted power `π A lum(Le)` (× 2 when two-sided), used for light selection.

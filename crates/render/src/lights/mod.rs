@@ -85,7 +85,12 @@ impl LightSet {
     /// Gathers the emitters of `scene` (see the module docs). Malformed references (a
     /// mesh or material id out of range) are skipped, never a panic.
     pub fn build(scene: &Scene) -> LightSet {
-        let bounds = scene.bounds();
+        // Scene::bounds() indexes meshes unchecked; skip instances of unknown meshes here.
+        let bounds = scene
+            .instances
+            .iter()
+            .filter_map(|i| scene.meshes.get(i.mesh as usize).map(|m| m.bounds().transformed(&i.transform)))
+            .fold(filtrace_core::Aabb::EMPTY, filtrace_core::Aabb::union);
         let r = if bounds.is_empty() { 0.0 } else { bounds.bounding_radius() };
         let scene_radius = if r.is_finite() && r > 0.0 { r } else { 1.0 };
         let mut set = LightSet { env_index: NONE, scene_radius, ..Default::default() };
@@ -305,3 +310,6 @@ fn position_ok(l: &Light) -> bool {
         _ => true,
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,270 @@
+//! Tests for every BSDF: chi-square of `sample` against `pdf`, `sample` consistent with
+//! `f`/`pdf`, reciprocity, energy (directional albedo ≤ 1) by two independent estimators
+//! (BSDF sampling vs uniform hemisphere sampling), and the Lambertian white furnace.
+
+use super::*;
+use filtrace_core::stats::{check_pdf_integral, chi2_sphere, Chi2Params};
+use filtrace_core::Vec3;
+
+/// SplitMix64: a small, independent RNG so these tests do not depend on the renderer's
+/// sampler.
+pub(crate) struct Rng(u64);
+
+impl Rng {
+    pub(crate) fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5851_F42D_4C95_7F2D)
+    }
+    pub(crate) fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub(crate) fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    pub(crate) fn vec2(&mut self) -> Vec2 {
+        Vec2::new(self.f32(), self.f32())
+    }
+}
+
+const GOLD_ETA: Vec3 = Vec3::new(0.143, 0.374, 1.442);
+const GOLD_K: Vec3 = Vec3::new(3.983, 2.385, 1.603);
+
+/// The BSDFs under test, at perceptual roughness `r`, with a name.
+fn bsdfs(r: f32) -> Vec<(String, SurfaceBsdf)> {
+    let a = microfacet::alpha_from_roughness(r);
+    vec![
+        (format!("conductor gold r={r}"), SurfaceBsdf::Conductor(Conductor::new(GOLD_ETA, GOLD_K, a))),
+        // Near-perfect mirror metal: the worst case for energy.
+        (
+            format!("conductor F~1 r={r}"),
+            SurfaceBsdf::Conductor(Conductor::new(Vec3::ZERO, Vec3::splat(1e3), a)),
+        ),
+        (format!("plastic r={r}"), SurfaceBsdf::Plastic(Plastic::new(Vec3::new(0.8, 0.5, 0.2), a, 1.5))),
+        (format!("plastic white r={r}"), SurfaceBsdf::Plastic(Plastic::new(Vec3::ONE, a, 1.5))),
+    ]
+}
+
+fn all_bsdfs() -> Vec<(String, SurfaceBsdf)> {
+    let mut v = vec![("diffuse".to_string(), SurfaceBsdf::Diffuse(Diffuse::new(Vec3::new(0.7, 0.4, 0.1))))];
+    for r in FAST_ROUGHNESS {
+        v.extend(bsdfs(r));
+    }
+    v
+}
+
+/// Roughness values of the fast tier (alpha 0.16, 0.49, 1.0); lower ones need the
+/// finer grid of the slow tier.
+const FAST_ROUGHNESS: [f32; 3] = [0.4, 0.7, 1.0];
+
+/// Outgoing directions: near normal, oblique, grazing.
+fn wos() -> [Vec3; 3] {
+    [0.95f32, 0.5, 0.12].map(|c| Vec3::new((1.0 - c * c).sqrt(), 0.0, c).normalize())
+}
+
+fn chi2_family(params: &Chi2Params, list: &[(String, SurfaceBsdf)], seed: u64) {
+    let n_tests = list.len() * wos().len();
+    let mut failures = Vec::new();
+    for (k, (name, b)) in list.iter().enumerate() {
+        for (j, wo) in wos().into_iter().enumerate() {
+            let mut rng = Rng::new(seed + (k * 16 + j) as u64);
+            let res = chi2_sphere(
+                params,
+                n_tests,
+                |_| {
+                    let (u, uc) = (rng.vec2(), rng.f32());
+                    b.sample(wo, u, uc).map(|s| s.wi)
+                },
+                |wi| b.pdf(wo, wi) as f64,
+            );
+            if !res.passed() {
+                failures.push(format!("{name}, wo.z = {}: {res}", wo.z));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "chi-square failures:\n{}", failures.join("\n"));
+}
+
+#[test]
+fn chi2_sample_matches_pdf() {
+    chi2_family(&Chi2Params::standard(), &all_bsdfs(), 1);
+}
+
+#[test]
+#[ignore = "slow: chi-square on a fine grid with 2M samples and low roughness"]
+fn chi2_sample_matches_pdf_low_roughness() {
+    let mut list = bsdfs(0.3);
+    list.extend(bsdfs(0.2));
+    chi2_family(&Chi2Params::thorough(), &list, 2);
+}
+
+/// The chi-square test has the power to catch a wrong pdf: a conductor whose pdf is off
+/// by 10 % in the lobe shape (alpha perturbed) is rejected.
+#[test]
+fn chi2_rejects_a_mismatched_pdf() {
+    let a = microfacet::alpha_from_roughness(0.5);
+    let b = Conductor::new(GOLD_ETA, GOLD_K, a);
+    let wrong = Conductor::new(GOLD_ETA, GOLD_K, a * 1.1);
+    let wo = wos()[1];
+    let mut rng = Rng::new(9);
+    let res = chi2_sphere(
+        &Chi2Params::standard(),
+        1,
+        |_| b.sample(wo, rng.vec2()).map(|s| s.wi),
+        |wi| wrong.pdf(wo, wi) as f64,
+    );
+    assert!(!res.passed(), "{res}");
+}
+
+#[test]
+fn sample_agrees_with_f_and_pdf() {
+    for (name, b) in all_bsdfs() {
+        let mut rng = Rng::new(3);
+        for _ in 0..20_000 {
+            let wo = filtrace_core::sampling::sample_cosine_hemisphere(rng.vec2());
+            if wo.z <= 1e-4 {
+                continue;
+            }
+            let Some(s) = b.sample(wo, rng.vec2(), rng.f32()) else { continue };
+            assert!(s.pdf > 0.0 && s.pdf.is_finite() && s.f.is_finite(), "{name}: {s:?}");
+            assert!((s.wi.length() - 1.0).abs() < 1e-4 && s.wi.z > 0.0, "{name}: {s:?}");
+            let (f, pdf) = (b.f(wo, s.wi), b.pdf(wo, s.wi));
+            let tol = |x: f32| 1e-4 * x.abs().max(1e-6);
+            assert!((s.pdf - pdf).abs() <= tol(pdf), "{name}: pdf {} vs {pdf}", s.pdf);
+            assert!((s.f - f).abs().max_element() <= tol(f.max_element()), "{name}: f {} vs {f}", s.f);
+        }
+        // Below-horizon wo gives nothing.
+        assert!(b.sample(Vec3::new(0.0, 0.6, -0.8), Vec2::splat(0.3), 0.5).is_none());
+        assert_eq!(b.f(Vec3::Z, Vec3::new(0.0, 0.6, -0.8)), Rgb::ZERO);
+        assert_eq!(b.pdf(Vec3::new(0.0, 0.6, -0.8), Vec3::Z), 0.0);
+    }
+}
+
+#[test]
+fn reciprocity() {
+    for (name, b) in all_bsdfs() {
+        let mut rng = Rng::new(4);
+        for _ in 0..5_000 {
+            let wo = filtrace_core::sampling::sample_uniform_hemisphere(rng.vec2());
+            let wi = filtrace_core::sampling::sample_uniform_hemisphere(rng.vec2());
+            let (a, c) = (b.f(wo, wi), b.f(wi, wo));
+            let d = (a - c).abs().max_element();
+            assert!(d <= 1e-4 * a.max_element().max(1e-3), "{name}: f(wo,wi) {a} != f(wi,wo) {c}");
+        }
+    }
+}
+
+/// Directional albedo `ρ(wo) = ∫ f cos dωi` by two estimators: BSDF importance sampling
+/// and uniform hemisphere sampling (the naive one). Both must agree within their
+/// combined standard error, and ρ must not exceed 1 (+ 4 σ).
+#[test]
+fn energy_conservation_two_estimators() {
+    let n = 100_000;
+    for (name, b) in all_bsdfs() {
+        for wo in wos() {
+            let mut rng = Rng::new(5);
+            let (mut s1, mut q1, mut s2, mut q2) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+            for _ in 0..n {
+                if let Some(s) = b.sample(wo, rng.vec2(), rng.f32()) {
+                    let w = s.f * s.wi.z / s.pdf;
+                    s1 += w;
+                    q1 += w * w;
+                }
+                let wi = filtrace_core::sampling::sample_uniform_hemisphere(rng.vec2());
+                let w = b.f(wo, wi) * wi.z / filtrace_core::sampling::uniform_hemisphere_pdf();
+                s2 += w;
+                q2 += w * w;
+            }
+            let nf = n as f32;
+            let (m1, m2) = (s1 / nf, s2 / nf);
+            let se1 = ((q1 / nf - m1 * m1).max(Vec3::ZERO) / nf).powf(0.5);
+            let se2 = ((q2 / nf - m2 * m2).max(Vec3::ZERO) / nf).powf(0.5);
+            for c in 0..3 {
+                let tol = 5.0 * (se1[c] * se1[c] + se2[c] * se2[c]).sqrt() + 1e-4;
+                assert!(
+                    (m1[c] - m2[c]).abs() <= tol,
+                    "{name} wo.z={}: sampled albedo {m1} vs uniform {m2} (tol {tol})",
+                    wo.z
+                );
+                assert!(m1[c] <= 1.0 + 4.0 * se1[c] + 1e-4, "{name} wo.z={}: albedo {m1} > 1", wo.z);
+            }
+        }
+    }
+}
+
+/// White furnace for Lambert: with ρ = 1 every sample has weight f cos / pdf = 1, so the
+/// albedo is exactly 1 (not just on average), and the pdf integrates to 1.
+#[test]
+fn diffuse_white_furnace() {
+    let b = SurfaceBsdf::Diffuse(Diffuse::new(Vec3::ONE));
+    let mut rng = Rng::new(6);
+    for _ in 0..100_000 {
+        let wo = filtrace_core::sampling::sample_cosine_hemisphere(rng.vec2());
+        if let Some(s) = b.sample(wo, rng.vec2(), rng.f32()) {
+            let w = s.f * s.wi.z / s.pdf;
+            assert!((w - Vec3::ONE).abs().max_element() < 1e-5, "weight {w}");
+        }
+    }
+    let integral = check_pdf_integral(|wi| b.pdf(Vec3::Z, wi) as f64, 1.0, 1e-3).unwrap();
+    assert!((integral - 1.0).abs() < 1e-3);
+}
+
+/// The pdfs integrate to exactly the probability that `sample` succeeds (microfacet
+/// samples reflected below the horizon are rejected: about half of them at alpha = 1 and
+/// normal incidence). Numerical integral vs Monte Carlo success rate.
+#[test]
+fn pdf_integral_equals_success_probability() {
+    let n = 50_000;
+    for (name, b) in all_bsdfs() {
+        for wo in wos() {
+            let i = filtrace_core::stats::integrate_sphere(|wi| b.pdf(wo, wi) as f64, 48, 96, 4);
+            let mut rng = Rng::new(7);
+            let ok = (0..n).filter(|_| b.sample(wo, rng.vec2(), rng.f32()).is_some()).count();
+            let p = ok as f64 / n as f64;
+            let se = (p * (1.0 - p) / n as f64).sqrt();
+            assert!(i <= 1.0 + 2e-3, "{name} wo.z={}: ∫pdf = {i} > 1", wo.z);
+            assert!((i - p).abs() <= 5.0 * se + 3e-3, "{name} wo.z={}: ∫pdf = {i}, success rate {p}", wo.z);
+        }
+    }
+}
+
+#[test]
+fn from_material_and_albedo() {
+    use filtrace_scene::{Bsdf, Texturable};
+    let d = SurfaceBsdf::from_material(
+        &Bsdf::Diffuse { reflectance: Texturable::Constant(Vec3::new(0.2, 0.3, 0.4)) },
+        &[],
+        Vec2::ZERO,
+    );
+    assert_eq!(d.albedo(), Vec3::new(0.2, 0.3, 0.4));
+    let c = SurfaceBsdf::from_material(
+        &Bsdf::Conductor { eta: GOLD_ETA, k: GOLD_K, roughness: 0.0 },
+        &[],
+        Vec2::ZERO,
+    );
+    let SurfaceBsdf::Conductor(cc) = c else { panic!("not a conductor") };
+    assert_eq!(cc.distrib.alpha, microfacet::MIN_ALPHA);
+    let a = c.albedo();
+    assert!(a.x > a.z && a.max_element() <= 1.0, "gold is reddish: {a}");
+    // A near-mirror is still a finite lobe (not `specular`), with consistent f / pdf.
+    let wo = Vec3::new(0.6, 0.0, 0.8);
+    let s = c.sample(wo, Vec2::new(0.3, 0.7), 0.5).unwrap();
+    assert!(!s.specular && s.pdf.is_finite() && s.f.is_finite());
+    assert!((s.wi - Vec3::new(-0.6, 0.0, 0.8)).length() < 0.01, "close to the mirror direction");
+    assert!((s.pdf - c.pdf(wo, s.wi)).abs() <= 1e-4 * s.pdf);
+    let p = SurfaceBsdf::from_material(
+        &Bsdf::Plastic {
+            diffuse: Texturable::Constant(Vec3::splat(f32::NAN)),
+            roughness: 0.5,
+            ior: f32::NAN,
+        },
+        &[],
+        Vec2::ZERO,
+    );
+    assert_eq!(p.albedo(), Vec3::ZERO, "NaN colours become black");
+    let wo = Vec3::new(0.0, 0.6, 0.8);
+    assert!(p.f(wo, Vec3::Z).is_finite());
+}

@@ -436,6 +436,37 @@ mod tests {
         assert_ne!(d.sample_discrete(0.125).0, 1);
     }
 
+    /// Binary-search sampling equals a linear scan of the CDF (the naive version) for
+    /// random weights with many zeros, at random and at boundary `u`.
+    #[test]
+    fn distribution_binary_search_matches_linear_scan() {
+        let mut state = 0x1234_5678_9abc_def0u64;
+        let mut next = || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for n in [1usize, 2, 3, 7, 64, 1000] {
+            let w: Vec<f32> = (0..n).map(|_| if next() < 0.4 { 0.0 } else { next() * 10.0 }).collect();
+            let d = Distribution1D::new(&w);
+            if d.is_degenerate() {
+                continue;
+            }
+            let naive = |u: f32| -> usize {
+                // First cell with positive weight whose CDF interval contains u.
+                (0..n)
+                    .find(|&i| d.pmf(i) > 0.0 && u < d.cdf[i + 1])
+                    .unwrap_or_else(|| (0..n).rev().find(|&i| d.pmf(i) > 0.0).unwrap())
+            };
+            let mut us: Vec<f32> = (0..2000).map(|_| next()).collect();
+            us.extend(d.cdf.iter().copied().filter(|&c| c < 1.0));
+            for u in us {
+                let (i, pmf, _) = d.sample_discrete(u);
+                assert_eq!(i, naive(u), "n {n}, u {u}");
+                assert!(pmf > 0.0 && w[i] > 0.0);
+            }
+        }
+    }
+
     #[test]
     fn distribution_handles_bad_weights() {
         let d = Distribution1D::new(&[f32::NAN, -1.0, 2.0, f32::INFINITY]);

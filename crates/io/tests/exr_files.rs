@@ -152,6 +152,38 @@ fn blender_and_mitsuba_channel_names_are_understood() {
             assert_eq!(got, plane(c), "{layer} channel {c}");
         }
     }
+    // u32 samples (object ids) become f32; a part of another size is skipped with a note.
+    let ids = dir.join("ids.exr");
+    {
+        use exr::prelude::*;
+        let id = AnyChannel::new("id.Y", FlatSamples::U32((0..(w * h) as u32).collect()));
+        let red = AnyChannel::new("R", FlatSamples::F32(vec![0.5; w * h]));
+        let small = AnyChannel::new("Y", FlatSamples::F32(vec![1.0; 4]));
+        let a = Layer::new(
+            (w, h),
+            LayerAttributes::named("main"),
+            Encoding::UNCOMPRESSED,
+            AnyChannels::sort(SmallVec::from_vec(vec![id, red])),
+        );
+        let b = Layer::new(
+            (2, 2),
+            LayerAttributes::named("thumb"),
+            Encoding::UNCOMPRESSED,
+            AnyChannels::sort(SmallVec::from_vec(vec![small])),
+        );
+        Image::from_layers(
+            ImageAttributes::new(IntegerBounds::from_dimensions((w, h))),
+            SmallVec::from_vec(vec![a, b]),
+        )
+        .write()
+        .to_file(&ids)
+        .unwrap();
+    }
+    let f = read_exr(&ids).unwrap();
+    assert_eq!(f.channel_names(), vec!["main.R".to_string(), "main.id.Y".to_string()]);
+    assert_eq!(f.channel("main.id.Y").unwrap()[5], 5.0);
+    assert_eq!(f.layer(&["id"]).unwrap().data()[w * h - 1], (w * h - 1) as f32);
+    assert_eq!(f.warnings().len(), 1, "{:?}", f.warnings());
     // A plain RGB file has no depth: its bare R must not be taken for one.
     let rgb = dir.join("rgb.exr");
     write_foreign(&rgb, w, h, &["R", "G", "B"]);

@@ -283,6 +283,20 @@ pub fn false_color(map: &Image) -> Image {
     out
 }
 
+/// Maps a non-negative scalar map logarithmically to [0, 1]: `lo` and below → 0, `hi` and
+/// above → 1 (for showing relMSE maps, whose values span decades, with [`false_color`]).
+/// Non-finite values → 0.
+pub fn log_scale(map: &Image, lo: f32, hi: f32) -> Image {
+    let (l0, l1) = (lo.max(f32::MIN_POSITIVE).log10(), hi.max(f32::MIN_POSITIVE).log10());
+    let span = (l1 - l0).max(f32::EPSILON);
+    let data = map
+        .data()
+        .iter()
+        .map(|v| if v.is_finite() && *v > 0.0 { ((v.log10() - l0) / span).clamp(0.0, 1.0) } else { 0.0 })
+        .collect();
+    Image::from_vec(map.width(), map.height(), map.channels(), data).expect("same size")
+}
+
 /// Every metric at once.
 pub fn compare(image: &Image, reference: &Image) -> Result<Metrics, MetricError> {
     let psnr = psnr(image, reference)?;
@@ -448,6 +462,16 @@ mod tests {
         // Grey images are read as grey RGB.
         let g = Image::filled(4, 4, 1, 0.5);
         assert_eq!(mse(&g, &Image::filled(4, 4, 3, 0.5)).unwrap(), 0.0);
+    }
+
+    #[test]
+    fn log_scale_maps_decades_linearly() {
+        let m = Image::from_vec(5, 1, 1, vec![1e-5, 1e-4, 1e-2, 1.0, f32::NAN]).unwrap();
+        let s = log_scale(&m, 1e-4, 1.0);
+        let want = [0.0, 0.0, 0.5, 1.0, 0.0];
+        for (g, w) in s.data().iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "{:?}", s.data());
+        }
     }
 
     #[test]

@@ -51,12 +51,122 @@ impl IndirectFilter for DenoiseFilter {
     }
 }
 
-/// A filter chosen by name: `none`, or one of `filtrace-denoise`'s with its paper preset.
-pub fn filter_by_name(name: &str, scene_scale: Option<f32>) -> Result<Box<dyn IndirectFilter>, String> {
-    if name == "none" {
-        return Ok(Box::new(NoFilter));
+/// Which filter and how: a name (`none`, `atrous`, `guided`, `bilateral`), an optional
+/// named preset of that filter (default: its paper preset), and optional overrides.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FilterChoice {
+    pub name: String,
+    pub preset: Option<String>,
+    /// Window radius (guided, bilateral).
+    pub radius: Option<u32>,
+    /// Number of levels (À-Trous).
+    pub iterations: Option<u32>,
+}
+
+impl FilterChoice {
+    pub fn named(name: &str) -> Self {
+        Self { name: name.to_string(), ..Self::default() }
     }
-    let f = Filter::from_name(name)
-        .ok_or_else(|| format!("unknown filter {name:?} (none, atrous, guided, bilateral)"))?;
-    Ok(Box::new(DenoiseFilter::new(f, scene_scale)))
+
+    /// The `filtrace-denoise` filter, or `None` for `none`. Errors name the valid choices.
+    pub fn denoise_filter(&self) -> Result<Option<Filter>, String> {
+        use filtrace_denoise::{AtrousParams, BilateralParams, GuidedParams};
+        fn pick<P: Copy>(filter: &str, presets: &[(&'static str, P)], want: Option<&str>) -> Result<P, String> {
+            let want = want.unwrap_or(presets[0].0);
+            presets.iter().find(|(n, _)| *n == want).map(|(_, p)| *p).ok_or_else(|| {
+                let names: Vec<_> = presets.iter().map(|(n, _)| *n).collect();
+                format!("filter {filter} has no preset {want:?} (presets: {})", names.join(", "))
+            })
+        }
+        let preset = self.preset.as_deref();
+        let f = match self.name.as_str() {
+            "none" => {
+                if self.preset.is_some() || self.radius.is_some() || self.iterations.is_some() {
+                    return Err("filter none takes no preset, radius or iterations".into());
+                }
+                return Ok(None);
+            }
+            "atrous" => {
+                let mut p = pick("atrous", &AtrousParams::presets(), preset)?;
+                if let Some(i) = self.iterations {
+                    p.iterations = i;
+                }
+                p.validate().map_err(|e| e.to_string())?;
+                Filter::Atrous(p)
+            }
+            "guided" => {
+                let mut p = pick("guided", &GuidedParams::presets(), preset)?;
+                if let Some(r) = self.radius {
+                    p.radius = r;
+                }
+                p.validate().map_err(|e| e.to_string())?;
+                Filter::Guided(p)
+            }
+            "bilateral" => {
+                let mut p = pick("bilateral", &BilateralParams::presets(), preset)?;
+                if let Some(r) = self.radius {
+                    p.radius = r;
+                    p.sigma_spatial = r as f32 / 2.0;
+                }
+                p.validate().map_err(|e| e.to_string())?;
+                Filter::Bilateral(p)
+            }
+            other => return Err(format!("unknown filter {other:?} (none, atrous, guided, bilateral)")),
+        };
+        if self.radius.is_some() && matches!(f, Filter::Atrous(_)) {
+            return Err("atrous has no radius; use iterations".into());
+        }
+        if self.iterations.is_some() && !matches!(f, Filter::Atrous(_)) {
+            return Err(format!("{} has no iterations; use radius", self.name));
+        }
+        Ok(Some(f))
+    }
+
+    /// The filter for the pipeline's filter slot.
+    pub fn build(&self, scene_scale: Option<f32>) -> Result<Box<dyn IndirectFilter>, String> {
+        Ok(match self.denoise_filter()? {
+            None => Box::new(NoFilter),
+            Some(f) => Box::new(DenoiseFilter::new(f, scene_scale)),
+        })
+    }
+}
+
+/// A filter chosen by name with its paper preset: `none`, `atrous`, `guided`, `bilateral`.
+pub fn filter_by_name(name: &str, scene_scale: Option<f32>) -> Result<Box<dyn IndirectFilter>, String> {
+    FilterChoice::named(name).build(scene_scale)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_of_every_filter_is_reachable_by_name_and_bad_choices_are_errors() {
+        use filtrace_denoise::{AtrousParams, BilateralParams, GuidedParams};
+        let names: Vec<(&str, Vec<&str>)> = vec![
+            ("atrous", AtrousParams::presets().iter().map(|p| p.0).collect()),
+            ("guided", GuidedParams::presets().iter().map(|p| p.0).collect()),
+            ("bilateral", BilateralParams::presets().iter().map(|p| p.0).collect()),
+        ];
+        for (f, presets) in names {
+            for p in presets {
+                let c = FilterChoice { preset: Some(p.into()), ..FilterChoice::named(f) };
+                assert_eq!(c.denoise_filter().unwrap().unwrap().name(), f);
+            }
+        }
+        assert_eq!(FilterChoice::named("none").denoise_filter(), Ok(None));
+        let bad = [
+            FilterChoice::named("median"),
+            FilterChoice { preset: Some("nope".into()), ..FilterChoice::named("guided") },
+            FilterChoice { radius: Some(0), ..FilterChoice::named("guided") },
+            FilterChoice { radius: Some(4), ..FilterChoice::named("atrous") },
+            FilterChoice { iterations: Some(3), ..FilterChoice::named("guided") },
+            FilterChoice { preset: Some("paper".into()), ..FilterChoice::named("none") },
+        ];
+        for c in bad {
+            assert!(c.denoise_filter().is_err(), "{c:?}");
+        }
+        let r = FilterChoice { radius: Some(8), ..FilterChoice::named("guided") }.denoise_filter().unwrap();
+        assert!(matches!(r, Some(Filter::Guided(p)) if p.radius == 8));
+    }
 }

@@ -32,6 +32,7 @@
 //! assert!((frame.images.color.rgb(3, 4) - Rgb::splat(0.75)).abs().max_element() < 1e-6);
 //! ```
 
+pub mod adaptive;
 pub mod denoise_filter;
 pub mod filter;
 pub mod lookup;
@@ -39,7 +40,7 @@ pub mod pipeline;
 pub mod render_source;
 pub mod source;
 
-pub use denoise_filter::{filter_by_name, DenoiseFilter};
+pub use denoise_filter::{filter_by_name, DenoiseFilter, FilterChoice};
 pub use filter::{GuideLayers, IndirectFilter, NoFilter};
 pub use lookup::{most_similar_guide, neighbour_guides, GuideGeometry, HitGeometry};
 pub use pipeline::{FilteredRenderer, Frame, FrameImages, FrameTimings, PipelineError, PipelineSettings};

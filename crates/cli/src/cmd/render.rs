@@ -275,15 +275,11 @@ struct Summary {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.adaptive.adaptive {
-        // The filtered/adaptive pipeline lives in `render_filtered` (pipeline engineer);
-        // until its `run(&CommonArgs, &FilterArgs, &AdaptiveArgs)` exists, say so.
-        anyhow::bail!(
-            "--adaptive is not available in this build yet: the filtered/adaptive render pipeline \
-             (cmd/render_filtered.rs) has no entry point; render without --adaptive"
-        );
+    // The filtered pipeline (and adaptive sampling, which drives it) lives in
+    // `render_filtered` (pipeline engineer).
+    if args.filter.enabled() || args.adaptive.adaptive {
+        return super::render_filtered::run(&args.common, &args.filter, &args.adaptive);
     }
-    let _ = &args.filter;
     run_plain(&args.common)
 }
 

@@ -1,9 +1,241 @@
 //! Options of `filtrace render` for the filtered pipeline (Bauszat et al. 2011) and for
 //! adaptive sampling; flattened into `render::Args`.
+//!
+//! `filtrace render --filter none|atrous|guided|bilateral --spp N --max-depth D` renders
+//! with [`filtrace_pipeline::FilteredRenderer`]: one guide ray per pixel estimates the
+//! indirect light, which is filtered; the further `N - 1` samples take it from the filtered
+//! map by the geometry-aware lookup. It writes one EXR with the final image and the `noisy`,
+//! `direct`, `indirect`, `filtered` (indirect) layers plus the guide G-buffer, a PNG beside
+//! it, and prints the milliseconds of each stage.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use filtrace_pipeline::{FilterChoice, FilteredRenderer, Frame, PipelineSettings, RenderSource};
+use filtrace_render::Renderer;
+use serde::Serialize;
+
+use super::render::CommonArgs;
 
 /// Reconstruction filter options of `filtrace render`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct FilterArgs {}
+pub struct FilterArgs {
+    /// Render with the filtered pipeline of Bauszat et al. 2011 and this filter for the
+    /// indirect light (`none` = the pipeline unfiltered). Without it: plain path tracing.
+    #[arg(long, value_parser = ["none", "atrous", "guided", "bilateral"])]
+    pub filter: Option<String>,
+    /// Named preset of the filter (atrous: paper, interactive, pure, color_only,
+    /// color_normal; guided: paper, paper_wide, normal_only, grey; bilateral: reference,
+    /// reference_wide, small). Default: the first (the paper's).
+    #[arg(long, requires = "filter")]
+    pub filter_preset: Option<String>,
+    /// Window radius in pixels (guided, bilateral).
+    #[arg(long, requires = "filter")]
+    pub filter_radius: Option<u32>,
+    /// Number of À-Trous levels.
+    #[arg(long, requires = "filter")]
+    pub filter_iterations: Option<u32>,
+    /// Paths estimating the indirect light at each guide ray (Bauszat: 1).
+    #[arg(long, default_value_t = 1, requires = "filter")]
+    pub indirect_paths: u32,
+    /// Filter the direct light too (for comparison; the paper filters only the indirect).
+    #[arg(long, requires = "filter")]
+    pub filter_direct: bool,
+    /// Filter the indirect radiance itself instead of radiance / albedo.
+    #[arg(long, requires = "filter")]
+    pub no_demodulate: bool,
+}
+
+impl FilterArgs {
+    /// True when `filtrace render` should run the filtered pipeline.
+    pub fn enabled(&self) -> bool {
+        self.filter.is_some()
+    }
+
+    pub fn choice(&self) -> FilterChoice {
+        FilterChoice {
+            name: self.filter.clone().unwrap_or_else(|| "none".into()),
+            preset: self.filter_preset.clone(),
+            radius: self.filter_radius,
+            iterations: self.filter_iterations,
+        }
+    }
+}
+
+/// A ready pipeline on a loaded scene (shared by `render`, `bench pipeline` and
+/// `experiment`).
+pub type Pipeline = FilteredRenderer<RenderSource, Box<dyn filtrace_pipeline::IndirectFilter>>;
+
+/// Builds the pipeline for `scene` at `settings` with `filter`; `max_depth` in Mitsuba's
+/// convention (3 = direct light and one indirect bounce).
+pub fn build_pipeline(
+    scene: filtrace_scene::Scene,
+    settings: PipelineSettings,
+    max_depth: i32,
+    filter: &FilterChoice,
+) -> anyhow::Result<Pipeline> {
+    let rs = filtrace_render::RenderSettings {
+        width: settings.width,
+        height: settings.height,
+        spp: settings.spp,
+        max_depth,
+        seed: settings.seed,
+    };
+    let renderer = Renderer::new(scene, rs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let source = RenderSource::new(renderer);
+    let f = filter.build(Some(source.scene_scale())).map_err(|e| anyhow::anyhow!("{e}"))?;
+    FilteredRenderer::new(source, f, settings).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+#[derive(Serialize)]
+struct Summary<'a> {
+    scene: &'a str,
+    width: u32,
+    height: u32,
+    spp: u32,
+    indirect_paths: u32,
+    max_depth: i32,
+    seed: u64,
+    filter: String,
+    threads: usize,
+    load_s: f64,
+    build_s: f64,
+    timings: filtrace_pipeline::FrameTimings,
+    lookup_failures: u64,
+    mean_rgb: [f64; 3],
+    output: &'a Path,
+}
+
+/// The filtered branch of `filtrace render`.
+pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) -> anyhow::Result<()> {
+    if adaptive.adaptive {
+        anyhow::bail!(
+            "--adaptive is not wired into `filtrace render` yet: the filtered pipeline takes \
+             per-pixel indirect counts (FilteredRenderer::render_frame_with_counts), but no \
+             importance map drives them here; render without --adaptive"
+        );
+    }
+    let settings = PipelineSettings {
+        width: common.res.width,
+        height: common.res.height,
+        spp: common.spp,
+        indirect_paths: filter.indirect_paths,
+        seed: common.seed,
+        demodulate_albedo: !filter.no_demodulate,
+        filter_direct: filter.filter_direct,
+    };
+    settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let choice = filter.choice();
+    choice.denoise_filter().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let t0 = Instant::now();
+    let scene = filtrace_scene::load_scene(&common.scene)
+        .with_context(|| format!("cannot load scene '{}'", common.scene))?;
+    let load_s = t0.elapsed().as_secs_f64();
+    let pool = common.thread_pool()?;
+    let threads = pool.current_num_threads();
+    let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
+    let build_s = pipeline.source().renderer().build_seconds();
+    let frame =
+        pool.install(|| pipeline.render_frame().map(|f| f.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let out = common.output_path();
+    write_frame(&out, &frame, &common.tonemap())?;
+    let m = frame.images.color.mean();
+    let summary = Summary {
+        scene: &common.scene,
+        width: settings.width,
+        height: settings.height,
+        spp: settings.spp,
+        indirect_paths: settings.indirect_paths,
+        max_depth: common.max_depth,
+        seed: settings.seed,
+        filter: pipeline.filter_mut().label(),
+        threads,
+        load_s,
+        build_s,
+        timings: frame.timings,
+        lookup_failures: frame.lookup_failures,
+        mean_rgb: [m[0], m[1], m[2]],
+        output: &out,
+    };
+    if common.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        let t = &frame.timings;
+        println!(
+            "{}: {}x{} at {} spp ({} indirect path(s) per guide ray), max depth {}, filter {}, {} threads",
+            summary.scene,
+            summary.width,
+            summary.height,
+            summary.spp,
+            summary.indirect_paths,
+            summary.max_depth,
+            summary.filter,
+            threads
+        );
+        println!(
+            "  frame {:.1} ms: guide rays {:.1}, filter {:.1}, further samples {:.1}, lookup {:.1} (trace {:.1})",
+            t.total_ms,
+            t.guide_ms,
+            t.filter_ms,
+            t.samples_ms,
+            t.lookup_ms,
+            t.trace_ms()
+        );
+        println!(
+            "  load {load_s:.3} s, build {build_s:.3} s; mean linear RGB {:.6} {:.6} {:.6}",
+            m[0], m[1], m[2]
+        );
+        if frame.lookup_failures > 0 {
+            println!(
+                "  {} further samples found no guide ray that hit (no indirect light)",
+                frame.lookup_failures
+            );
+        }
+        println!("  wrote {} and {}", out.display(), out.with_extension("png").display());
+    }
+    Ok(())
+}
+
+/// One EXR with every layer of the frame (`R,G,B` final, `noisy`, `direct`, `indirect`,
+/// `filtered` = filtered indirect, `indirect_map`/`filtered_map` = the guide rays' map
+/// before/after the filter, guide `albedo`, `normal`, `position`, `depth`) and the PNG of
+/// the final image beside it.
+pub fn write_frame(
+    exr_path: &Path,
+    frame: &Frame,
+    tonemap: &filtrace_io::TonemapParams,
+) -> anyhow::Result<()> {
+    if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create folder {}", dir.display()))?;
+    }
+    const RGB: &[&str] = &["R", "G", "B"];
+    const XYZ: &[&str] = &["X", "Y", "Z"];
+    let im = &frame.images;
+    let mut exr = filtrace_io::ExrImage::new(im.color.width(), im.color.height());
+    let mut layers: Vec<(&str, &[&str], &filtrace_core::Image)> = vec![
+        ("", RGB, &im.color),
+        ("noisy", RGB, &im.noisy),
+        ("direct", RGB, &im.direct),
+        ("indirect", RGB, &im.indirect),
+        ("filtered", RGB, &im.filtered_indirect),
+        ("indirect_map", RGB, &im.indirect_map),
+        ("filtered_map", RGB, &im.filtered_map),
+        ("albedo", RGB, &im.guide.albedo),
+        ("normal", XYZ, &im.guide.normal),
+        ("position", XYZ, &im.guide.position),
+        ("depth", &["Z"], &im.guide.depth),
+    ];
+    if im.filtered_direct.pixel_count() > 0 {
+        layers.push(("filtered_direct", RGB, &im.filtered_direct));
+    }
+    for (name, channels, image) in layers {
+        exr.insert(name, channels, image)?;
+    }
+    filtrace_io::write_exr(exr_path, &exr)?;
+    filtrace_io::write_png(exr_path.with_extension("png"), &im.color, tonemap)?;
+    Ok(())
+}
 
 /// Adaptive sampling options of `filtrace render` (Bauszat et al. 2011, "Adaptive
 /// sampling for geometry-aware reconstruction filters"; see docs/adaptive.md).

@@ -1,0 +1,110 @@
+//! Adaptive sampling of the guide rays' indirect light (Bauszat, Eisemann and Magnor,
+//! *Adaptive Sampling for Geometry-aware Reconstruction Filters*, 2011) on this pipeline.
+//!
+//! Owned by the adaptive-sampling work (`filtrace-adaptive`); kept apart from the frame in
+//! [`crate::pipeline`], which it drives only through
+//! [`FilteredRenderer::render_frame_with_counts`]. A frame:
+//!
+//! 1. **G-buffer pre-pass** — the guide rays' first hits (normal, world position) are
+//!    traced with no indirect path: the same eye rays as the guide pass, so the importance
+//!    map sees exactly the geometry the filter will see. Costs one primary ray and one light
+//!    sample per pixel.
+//! 2. **importance + apportionment** — [`filtrace_adaptive::plan_frame`] (§4.1, §4.2): a
+//!    budget of `budget_spp · pixels` indirect paths, at least `min_spp` each.
+//! 3. **frame** — the pipeline's frame with those per-pixel counts; any filter.
+//!
+//! The batch system of §4.3 ([`filtrace_adaptive::BatchSchedule`]) is not used here: the
+//! pipeline traces a pixel's paths in one call of its [`PathSource`], row-parallel, and
+//! rayon's work stealing balances rows with unequal counts.
+
+use filtrace_adaptive::{AdaptiveError, AdaptiveParams, SampleCounts};
+use filtrace_core::{Image, Vec2};
+use rayon::prelude::*;
+
+use crate::filter::IndirectFilter;
+use crate::pipeline::{FilteredRenderer, Frame, PipelineError, PipelineSettings};
+use crate::source::{PathSource, SampleKey};
+
+/// What the adaptive scheme decided for a frame.
+#[derive(Clone, Debug)]
+pub struct AdaptivePlan {
+    /// Importance `1 - W_p / |window|`, 1 channel (write it as a layer to see it).
+    pub importance: Image,
+    /// Indirect paths of each guide ray.
+    pub counts: SampleCounts,
+    /// Milliseconds of the G-buffer pre-pass and of importance + apportionment.
+    pub prepass_ms: f64,
+    pub plan_ms: f64,
+}
+
+/// Why an adaptive frame failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AdaptiveFrameError {
+    Adaptive(AdaptiveError),
+    Pipeline(PipelineError),
+}
+
+impl std::fmt::Display for AdaptiveFrameError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Adaptive(e) => write!(f, "adaptive sampling: {e}"),
+            Self::Pipeline(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for AdaptiveFrameError {}
+
+/// Normal and world position of each pixel's guide ray (zero normal where it escaped:
+/// background for the importance map).
+pub fn guide_gbuffer<S: PathSource>(source: &S, settings: &PipelineSettings) -> (Image, Image) {
+    let (w, h) = (settings.width as usize, settings.height as usize);
+    let mut normal = Image::new(w, h, 3);
+    let mut position = Image::new(w, h, 3);
+    normal
+        .data_mut()
+        .par_chunks_mut(w * 3)
+        .zip(position.data_mut().par_chunks_mut(w * 3))
+        .enumerate()
+        .for_each(|(y, (nrow, prow))| {
+            for x in 0..w {
+                let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: settings.seed };
+                let e = source.trace(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), 0);
+                if let Some(hit) = e.hit {
+                    nrow[x * 3..x * 3 + 3].copy_from_slice(&hit.normal.to_array());
+                    prow[x * 3..x * 3 + 3].copy_from_slice(&e.position.to_array());
+                }
+            }
+        });
+    (normal, position)
+}
+
+/// Importance map and per-pixel indirect counts for the frame `settings` describes.
+pub fn plan<S: PathSource>(
+    source: &S,
+    settings: &PipelineSettings,
+    params: &AdaptiveParams,
+) -> Result<AdaptivePlan, AdaptiveError> {
+    let t0 = std::time::Instant::now();
+    let (normal, position) = guide_gbuffer(source, settings);
+    let prepass_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = std::time::Instant::now();
+    let (importance, counts) = filtrace_adaptive::plan_frame(&normal, &position, params)?;
+    Ok(AdaptivePlan { importance, counts, prepass_ms, plan_ms: t1.elapsed().as_secs_f64() * 1e3 })
+}
+
+impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
+    /// A frame whose guide rays trace their indirect paths as the adaptive scheme
+    /// apportions `params.budget_spp · pixels` of them (`settings.indirect_paths` is not
+    /// used). Returns the frame and the plan.
+    pub fn render_frame_adaptive(
+        &mut self,
+        params: &AdaptiveParams,
+    ) -> Result<(&Frame, AdaptivePlan), AdaptiveFrameError> {
+        let plan = plan(self.source(), self.settings(), params).map_err(AdaptiveFrameError::Adaptive)?;
+        let frame = self
+            .render_frame_with_counts(Some(plan.counts.counts()))
+            .map_err(AdaptiveFrameError::Pipeline)?;
+        Ok((frame, plan))
+    }
+}

@@ -335,6 +335,33 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        /// Frames from arbitrary (normalised) directions are orthonormal and right-handed.
+        #[test]
+        fn frame_orthonormal_for_any_normal(x in -1.0f32..1.0, y in -1.0f32..1.0, z in -1.0f32..1.0) {
+            let v = Vec3::new(x, y, z);
+            proptest::prop_assume!(v.length() > 1e-3);
+            let n = v.normalize();
+            let f = Frame::from_z(n);
+            proptest::prop_assert!((f.x.length() - 1.0).abs() < 1e-4 && (f.y.length() - 1.0).abs() < 1e-4);
+            proptest::prop_assert!(f.x.dot(f.y).abs() < 1e-4 && f.x.dot(n).abs() < 1e-4 && f.y.dot(n).abs() < 1e-4);
+            proptest::prop_assert!((f.x.cross(f.y) - n).length() < 1e-4);
+        }
+
+        /// Every warp maps the closed unit square into its domain with a finite result.
+        #[test]
+        fn warps_stay_in_domain(u in 0.0f32..1.0, v in 0.0f32..1.0, c in -1.0f32..1.0) {
+            let uv = Vec2::new(u, v);
+            proptest::prop_assert!(sample_concentric_disk(uv).length() <= 1.0 + 1e-6);
+            let h = sample_cosine_hemisphere(uv);
+            proptest::prop_assert!(h.is_finite() && h.z >= 0.0 && (h.length() - 1.0).abs() < 1e-4);
+            let k = sample_uniform_cone(uv, c);
+            proptest::prop_assert!(k.z >= c - 1e-5 && (k.length() - 1.0).abs() < 1e-4);
+            let b = sample_uniform_triangle(uv);
+            proptest::prop_assert!(b.iter().all(|&x| (-1e-6..=1.0 + 1e-6).contains(&x)));
+        }
+    }
+
     #[test]
     fn disk_and_hemisphere_warps_land_in_their_domains() {
         for u in grid(64) {

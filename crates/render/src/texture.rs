@@ -9,6 +9,9 @@
 //! Bad input never panics: an unknown texture id, an empty texture or a texel buffer of
 //! the wrong size evaluates to the texturable's `factor` alone (as if the texture were
 //! white); non-finite `uv` reads as `(0, 0)`.
+//!
+//! Reference: pbrt-v4 section 10.4.3 (image texture lookups, bilinear filtering) and the
+//! glTF 2.0 specification (texture coordinate origin at the image's top-left).
 
 use filtrace_core::{Rgb, Vec2};
 use filtrace_scene::{Texturable, Texture};

@@ -45,6 +45,8 @@ fn bsdfs(r: f32) -> Vec<(String, SurfaceBsdf)> {
         ),
         (format!("plastic r={r}"), SurfaceBsdf::Plastic(Plastic::new(Vec3::new(0.8, 0.5, 0.2), a, 1.5))),
         (format!("plastic white r={r}"), SurfaceBsdf::Plastic(Plastic::new(Vec3::ONE, a, 1.5))),
+        // High-index coat: strong Fresnel, the other energy extreme.
+        (format!("plastic white ior 3 r={r}"), SurfaceBsdf::Plastic(Plastic::new(Vec3::ONE, a, 3.0))),
     ]
 }
 

@@ -1,5 +1,5 @@
-//! `grass`: a 10 m x 10 m meadow of thin, curved grass blades (about 10,000 blades, 5
-//! triangles each) around two rocks, lit by a large warm area light and a blue sky. Geometry
+//! `grass`: a 10 m x 10 m meadow of thin, curved grass blades (16,000 blades, 5 triangles
+//! each) around two rocks, lit by a large warm area light and a blue sky. Geometry
 //! finer than a pixel at most distances: the case where screen-space filters, which trust
 //! normals and depth, struggle. Deterministic (fixed seed). Units are metres.
 
@@ -10,7 +10,7 @@ use crate::shapes;
 use crate::types::{Camera, Environment, Instance, Light, Material, MaterialId, Mesh, Scene};
 
 /// Number of blades.
-pub const BLADES: usize = 10_000;
+pub const BLADES: usize = 16_000;
 /// Seed of the layout.
 pub const SEED: u64 = 0x0067_7261_7373; // "grass" in ASCII
 
@@ -61,10 +61,10 @@ pub fn grass() -> Scene {
         ground: Rgb::splat(0.1),
     }));
     s.camera = Some(Camera {
-        eye: Vec3::new(0.0, 0.55, 4.2),
-        target: Vec3::new(0.0, 0.15, 0.0),
+        eye: Vec3::new(0.0, 1.4, 6.0),
+        target: Vec3::new(0.0, 0.1, 0.0),
         up: Vec3::Y,
-        vfov_deg: 45.0,
+        vfov_deg: 40.0,
     });
     s
 }

@@ -5,7 +5,7 @@
 //! |---|---|---:|
 //! | `cornell` | the original Cornell box data with its ceiling light (see [`cornell`]) | 36 |
 //! | `colonnade` | a hall of thin pillars and beams lit by a low window light: long thin shadows | 696 |
-//! | `grass` | ~10,000 thin curved blades on a meadow, area light + sky: sub-pixel geometry | ~51,000 |
+//! | `grass` | 16,000 thin curved blades on a meadow, area light + sky: sub-pixel geometry | 81,924 |
 //! | `bunny-room` | the Stanford bunny in the Cornell room (needs `../shared/scenes/bunny/bunny.obj`) | ~56,000 |
 //!
 //! All built-in scenes are deterministic: the same name gives the same scene, bit for bit.

@@ -381,3 +381,40 @@ fn bad_input_is_skipped_not_a_panic() {
     assert!(lights.is_empty(), "{} lights", lights.len());
     assert!(lights.skipped() >= 8, "skipped {}", lights.skipped());
 }
+
+/// The light chi-square test has power: claiming the area density without the
+/// solid-angle conversion (`pmf / A` instead of `pmf d² / (|cos| A)`) is rejected.
+#[test]
+fn chi2_rejects_area_measure_pdf() {
+    let scene = test_scene(false);
+    let lights = LightSet::build(&scene);
+    let mut rng = Rng::new(71);
+    let wrong = |d: Vec3| -> f64 {
+        let Some((i, prim, _, _)) = nearest_emitter(&scene, P, d) else { return 0.0 };
+        let idx = lights.area_light_index(i, prim).unwrap();
+        let LightKind::Area(a) = &lights.lights[idx] else { return 0.0 };
+        (lights.selection_pmf(idx) / a.area) as f64
+    };
+    let params = Chi2Params { samples: 100_000, ..Chi2Params::standard() };
+    let res = chi2_sphere(&params, 1, |_| lights.sample_li(P, rng.f32(), rng.vec2()).map(|s| s.wi), wrong);
+    assert!(!res.passed(), "{res}");
+}
+
+/// The (instance, prim) → light table agrees with a brute-force search over all area
+/// lights by world-space vertices, for every triangle of the scene.
+#[test]
+fn area_lookup_matches_brute_force() {
+    let scene = test_scene(true);
+    let lights = LightSet::build(&scene);
+    for (ii, inst) in scene.instances.iter().enumerate() {
+        let mesh = &scene.meshes[inst.mesh as usize];
+        for prim in 0..mesh.triangle_count() {
+            let t = mesh.triangle(prim).map(|v| inst.transform.transform_point3(v));
+            let brute = lights.lights.iter().position(|l| match l {
+                LightKind::Area(a) => (a.p0 - t[0]).length() < 1e-6 && (a.p0 + a.e1 - t[1]).length() < 1e-6,
+                _ => false,
+            });
+            assert_eq!(lights.area_light_index(ii as u32, prim as u32), brute, "instance {ii} prim {prim}");
+        }
+    }
+}

@@ -23,6 +23,7 @@ pub mod shapes;
 pub mod texture;
 pub mod toml_scene;
 pub mod types;
+pub mod validate;
 
 pub use builtin::{builtin, builtin_names};
 pub use error::SceneError;

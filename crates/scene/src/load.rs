@@ -9,10 +9,11 @@ use crate::error::SceneError;
 use crate::types::{Camera, Scene};
 
 /// Loads a scene file, choosing the loader from the extension (case-insensitive):
-/// `.obj`, `.gltf`/`.glb`, `.ply`, `.toml`.
+/// `.obj`, `.gltf`/`.glb`, `.ply`, `.toml`. The result has passed
+/// [`crate::validate::sanitize`]: nothing non-finite, every index in range.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    match ext.as_str() {
+    let mut scene = match ext.as_str() {
         "obj" => crate::obj::load_obj(path),
         "ply" => crate::ply::load_ply(path),
         "gltf" | "glb" => crate::gltf_load::load_gltf(path),
@@ -23,7 +24,9 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
                 path.display()
             ),
         }),
-    }
+    }?;
+    crate::validate::sanitize(&mut scene, path)?;
+    Ok(scene)
 }
 
 /// A built-in scene name (see [`builtin_names`]) or a path to a scene file.

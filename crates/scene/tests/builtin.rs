@@ -152,3 +152,13 @@ fn load_scene_takes_names_and_paths() {
     let e = load_scene("scene.xyz").unwrap_err();
     assert!(matches!(e, SceneError::Unsupported { .. }), "{e:?}");
 }
+
+#[test]
+fn builtins_pass_the_loader_checks_unchanged() {
+    for &name in builtin_names() {
+        let Some(s) = available(name) else { continue };
+        let mut t = s.clone();
+        filtrace_scene::validate::sanitize(&mut t, std::path::Path::new(name)).unwrap();
+        assert_eq!(t.stats, s.stats, "{name}: sanitize had to repair something");
+    }
+}

@@ -323,3 +323,26 @@ fn base64(data: &[u8]) -> String {
     }
     out
 }
+
+#[test]
+fn non_finite_data_never_leaves_a_loader() {
+    // PLY: a NaN vertex used only by a (skipped) triangle is removed; bounds stay finite.
+    let ply =
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+               element face 2\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0\nnan 0 0\n1 0 0\n0 1 0\n3 0 2 3\n3 0 1 2\n";
+    let dir = temp_files("ply-nan", &[("t.ply", ply.as_bytes())]);
+    let s = load(&dir.join("t.ply")).unwrap();
+    assert_eq!(s.stats.degenerate_triangles_skipped, 1);
+    assert_eq!(s.meshes[0].positions.len(), 3);
+    assert_eq!(s.meshes[0].triangle(0), [Vec3::ZERO, Vec3::X, Vec3::Y]);
+    let b = s.bounds();
+    assert!(b.min.is_finite() && b.max.is_finite());
+    // OBJ: a NaN texture coordinate and an infinite normal are repaired with warnings.
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt nan 0\nvn 0 0 inf\nf 1/1/1 2/1/1 3/1/1\n";
+    let dir = temp_files("obj-nan", &[("t.obj", obj.as_bytes())]);
+    let s = load(&dir.join("t.obj")).unwrap();
+    assert!(s.meshes[0].uvs.iter().all(|t| t.is_finite()));
+    assert!(s.meshes[0].normals.is_empty());
+    assert!(s.stats.warnings.iter().any(|w| w.contains("texture coordinates")), "{:?}", s.stats.warnings);
+}

@@ -139,6 +139,14 @@ fn bad_input_exits_nonzero_with_a_message_and_no_panic() {
         assert!(err.contains(needle), "{args:?}: stderr does not mention '{needle}': {err}");
     }
     assert!(!out.exists(), "a failed render wrote {}", out.display());
+    // The output name is checked before rendering.
+    for bad_out in [dir.join("x.png"), dir.clone()] {
+        let o = run(bin().args(["render", "--res", "8x8", "--spp", "1", "--out"]).arg(&bad_out));
+        let err = stderr(&o);
+        assert!(!o.status.success() && !err.contains("panicked"), "{err}");
+        assert!(err.contains("exr"), "{err}");
+    }
+    assert!(!dir.join("x.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -1,6 +1,7 @@
 //! `filtrace compare IMAGE.exr REFERENCE.exr`: MSE, relMSE, PSNR, SSIM and LDR-FLIP of an
 //! image against a reference (definitions in `filtrace_eval::metrics`), and error maps:
-//! `<image>.relmse.exr` / `.relmse.png` (per-pixel relative MSE, false colour clamped at 1)
+//! `<image>.relmse.exr` / `.relmse.png` (per-pixel relative MSE; the PNG in false colour on
+//! a log scale from 1e-4 (black) to 1 (yellow))
 //! and `<image>.flip.exr` / `.flip.png` (the FLIP map, magma false colour).
 
 use anyhow::Context;
@@ -17,6 +18,9 @@ pub struct Args {
     /// Layer of IMAGE to compare, e.g. `filtered` (names as in `filtrace_io::aliases`).
     #[arg(long, default_value = "color")]
     pub layer: String,
+    /// Layer of REFERENCE to compare against.
+    #[arg(long, default_value = "color")]
+    pub reference_layer: String,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -46,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Ok(exr.require_layer(&[layer])?)
     };
     let image = read(&args.image, &args.layer)?;
-    let reference = read(&args.reference, "color")?;
+    let reference = read(&args.reference, &args.reference_layer)?;
     let m = metrics::compare(&image, &reference).with_context(|| {
         format!("cannot compare {} with {}", args.image.display(), args.reference.display())
     })?;
@@ -64,11 +68,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let stem = if args.layer == "color" { stem } else { format!("{stem}.{}", args.layer) };
         let relmse = metrics::rel_mse_map(&image, &reference)?;
         let flip = metrics::flip_map(&image, &reference)?;
-        for (name, map) in [("relmse", &relmse), ("flip", &flip)] {
+        let relmse_shown = metrics::log_scale(&relmse, 1e-4, 1.0);
+        for (name, map, shown) in [("relmse", &relmse, &relmse_shown), ("flip", &flip, &flip)] {
             let exr = dir.join(format!("{stem}.{name}.exr"));
             let png = dir.join(format!("{stem}.{name}.png"));
             filtrace_io::write_image(&exr, map)?;
-            filtrace_io::write_image(&png, &metrics::false_color(map))?;
+            filtrace_io::write_image(&png, &metrics::false_color(shown))?;
             maps.extend([exr, png]);
         }
     }

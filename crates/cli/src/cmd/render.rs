@@ -133,6 +133,28 @@ impl CommonArgs {
             .unwrap_or_else(|| PathBuf::from("filtrace-out").join(format!("{}.exr", self.scene_name())))
     }
 
+    /// [`CommonArgs::output_path`], checked before any work: it must end in `.exr` and its
+    /// folder is created now, so that a long render never fails at the end for want of a
+    /// place to write.
+    pub fn prepare_output(&self) -> anyhow::Result<PathBuf> {
+        let out = self.output_path();
+        let is_exr = out.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        if !is_exr {
+            anyhow::bail!(
+                "--out {}: the output must be an .exr file (the PNG is written beside it)",
+                out.display()
+            );
+        }
+        if out.is_dir() {
+            anyhow::bail!("--out {}: is a folder, expected an .exr file name", out.display());
+        }
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create output folder {}", dir.display()))?;
+        }
+        Ok(out)
+    }
+
     pub fn thread_count(&self) -> usize {
         self.threads
             .map(|t| t as usize)
@@ -286,7 +308,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The plain path-traced render (no filter, uniform sampling).
 pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
-    let out = c.output_path();
     // First, so that a Ctrl-C during loading also stops cleanly.
     let cancel = install_ctrlc();
 
@@ -294,6 +315,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let scene =
         filtrace_scene::load_scene(&c.scene).with_context(|| format!("cannot load scene '{}'", c.scene))?;
     let load_s = t0.elapsed().as_secs_f64();
+    let out = c.prepare_output()?;
     let load_warnings = scene.stats.warnings.clone();
     let degenerate = scene.stats.degenerate_triangles_skipped;
     if !c.json {

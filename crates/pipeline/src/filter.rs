@@ -7,7 +7,9 @@ use filtrace_core::Image;
 /// The guide rays' G-buffer: one entry per pixel, noise-free (one ray through the centre).
 #[derive(Clone, Debug)]
 pub struct GuideLayers {
-    /// Unit world-space shading normal, 3 channels; zero where the guide ray escaped.
+    /// Unit world-space shading normal, 3 channels; zero where the guide ray escaped or
+    /// (when demodulating) hit a surface of zero albedo, whose indirect map entry carries no
+    /// estimate: filters treat zero-normal pixels as background.
     pub normal: Image,
     /// Distance along the guide ray, 1 channel; 0 where it escaped.
     pub depth: Image,
@@ -15,7 +17,7 @@ pub struct GuideLayers {
     pub albedo: Image,
     /// World-space hit position, 3 channels; zero where the guide ray escaped.
     pub position: Image,
-    /// 1 where the guide ray hit a surface, 0 where it escaped; 1 channel.
+    /// 1 where the normal is valid (see `normal`), 0 elsewhere; 1 channel.
     pub coverage: Image,
 }
 

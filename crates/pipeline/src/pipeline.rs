@@ -419,11 +419,16 @@ fn store_guides(
         let (x, y) = (i % w, i / w);
         guides.hits[i] = e.hit;
         let (n, d) = e.hit.map_or((Rgb::ZERO, 0.0), |h| (h.normal, h.depth));
-        im.guide.normal.set_rgb(x, y, n);
+        // A surface that reflects nothing (a pure emitter, like the Cornell light) has no
+        // irradiance estimate: its map entry is 0 by construction, not a sample. Its normal
+        // is zeroed in the filter's G-buffer so that filters treat it as background and do
+        // not blend that 0 into coplanar neighbours (the ceiling around the light).
+        let reflects = !demod || e.albedo.max_element() > 0.0;
+        im.guide.normal.set_rgb(x, y, if reflects { n } else { Rgb::ZERO });
         im.guide.depth.pixel_mut(x, y)[0] = d;
         im.guide.albedo.set_rgb(x, y, e.albedo);
         im.guide.position.set_rgb(x, y, e.position);
-        im.guide.coverage.pixel_mut(x, y)[0] = if e.hit.is_some() { 1.0 } else { 0.0 };
+        im.guide.coverage.pixel_mut(x, y)[0] = if e.hit.is_some() && reflects { 1.0 } else { 0.0 };
         let ind = if demod { e.indirect / (e.albedo + DEMODULATION_EPS) } else { e.indirect };
         debug_assert!(ind.is_finite(), "non-finite indirect light at guide ({x}, {y}): {ind}");
         im.indirect_map.set_rgb(x, y, ind);

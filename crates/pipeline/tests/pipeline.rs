@@ -196,3 +196,36 @@ fn bad_settings_are_errors_not_panics() {
         assert!(!e.to_string().is_empty());
     }
 }
+
+#[test]
+fn black_emitters_are_background_for_the_filter_but_keep_their_geometry_for_the_lookup() {
+    struct Lamp;
+    impl PathSource for Lamp {
+        fn trace(&self, _k: SampleKey, film: Vec2, paths: u32) -> EyeSample {
+            let hit = Some(HitGeometry { normal: Vec3::Y, depth: 1.0 });
+            let lamp = film.x < 2.0;
+            let albedo = if lamp { Rgb::ZERO } else { Rgb::splat(0.5) };
+            let indirect = if paths > 0 && !lamp { Rgb::splat(0.5) } else { Rgb::ZERO };
+            EyeSample { hit, albedo, direct: Rgb::ONE, indirect, ..Default::default() }
+        }
+    }
+    struct Check;
+    impl IndirectFilter for Check {
+        fn label(&self) -> String {
+            "check".into()
+        }
+        fn apply(&mut self, noisy: &Image, guide: &GuideLayers, out: &mut Image) -> Result<(), String> {
+            for x in 0..4 {
+                let lamp = x < 2;
+                assert_eq!(guide.normal.rgb(x, 0) == Vec3::ZERO, lamp, "x = {x}");
+                assert_eq!(guide.coverage.pixel(x, 0)[0], if lamp { 0.0 } else { 1.0 });
+            }
+            out.data_mut().copy_from_slice(noisy.data());
+            Ok(())
+        }
+    }
+    let mut r = FilteredRenderer::new(Lamp, Check, settings(4, 1, 1)).unwrap();
+    let f = r.render_frame().unwrap();
+    assert_eq!(f.lookup_failures, 0);
+    assert!((f.images.color.rgb(3, 0).x - 1.5).abs() < 1e-5);
+}

@@ -4,7 +4,9 @@
 //! Default: the Cornell box at 512x512, 1 spp (the guide ray), max depth 3 (direct light
 //! and one indirect bounce), guided filter (paper preset), all cores; 3 warm-up frames,
 //! then 20 timed frames of the same renderer (buffers kept between frames, as a viewer
-//! would drive it). Per stage: median and mean.
+//! would drive it). Per stage: median and mean. The machine may be shared, so the process
+//! CPU time per frame (Linux `/proc/self/stat`) is reported too: `cpu_ms / threads` is the
+//! frame time the threads would take with the cores to themselves.
 
 use filtrace_pipeline::{FilterChoice, FrameTimings, PipelineSettings};
 use serde::Serialize;
@@ -56,6 +58,10 @@ struct Row {
     filter: String,
     frames: u32,
     fps_median: f64,
+    /// Process CPU milliseconds per frame (user + system), mean; `None` off Linux.
+    cpu_ms_mean: Option<f64>,
+    /// `1000 / (cpu_ms / threads)`: frames per second with every thread on its own core.
+    fps_if_cores_free: Option<f64>,
     stages: Vec<StageStats>,
 }
 
@@ -70,6 +76,17 @@ struct Report {
     threads: usize,
     triangles: usize,
     rows: Vec<Row>,
+}
+
+/// CPU time (user + system) of this process in milliseconds, from `/proc/self/stat`
+/// (fields 14 and 15, in clock ticks; 100 ticks per second on Linux).
+fn process_cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) may contain spaces; fields after the last ')' are plain.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let (utime, stime): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
+    Some((utime + stime) * 10.0)
 }
 
 fn stats(name: &str, mut v: Vec<f64>) -> StageStats {
@@ -99,13 +116,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             super::render_filtered::build_pipeline(scene.clone(), settings.clone(), a.max_depth, &choice)
         })?;
         let mut times: Vec<FrameTimings> = Vec::new();
+        let mut cpu = Vec::new();
         for i in 0..a.warmup + a.frames {
+            let c0 = process_cpu_ms();
             let t =
                 pool.install(|| p.render_frame().map(|fr| fr.timings)).map_err(|e| anyhow::anyhow!("{e}"))?;
             if i >= a.warmup {
                 times.push(t);
+                if let (Some(c0), Some(c1)) = (c0, process_cpu_ms()) {
+                    cpu.push(c1 - c0);
+                }
             }
         }
+        // Clock ticks are 10 ms, too coarse for a per-frame median: take the mean.
+        let cpu_ms_mean =
+            (cpu.len() == times.len()).then(|| cpu.iter().sum::<f64>() / cpu.len().max(1) as f64);
+        let fps_if_cores_free = cpu_ms_mean.map(|c| 1000.0 * threads as f64 / c.max(1e-9));
         let col = |g: fn(&FrameTimings) -> f64| times.iter().map(g).collect::<Vec<_>>();
         let stages = vec![
             stats("guide", col(|t| t.guide_ms)),
@@ -115,7 +141,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             stats("total", col(|t| t.total_ms)),
         ];
         let fps_median = 1000.0 / stages[4].median_ms.max(1e-9);
-        rows.push(Row { filter: p.filter_mut().label(), frames: a.frames, fps_median, stages });
+        rows.push(Row {
+            filter: p.filter_mut().label(),
+            frames: a.frames,
+            fps_median,
+            cpu_ms_mean,
+            fps_if_cores_free,
+            stages,
+        });
     }
     let report = Report {
         scene: a.scene.clone(),
@@ -137,13 +170,21 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, threads, triangles, a.frames
     );
     println!();
-    println!("| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps |");
-    println!("|---|---:|---:|---:|---:|---:|---:|");
+    println!("| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in &report.rows {
         let m: Vec<f64> = r.stages.iter().map(|s| s.median_ms).collect();
         println!(
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
-            r.filter, m[0], m[1], m[2], m[3], m[4], r.fps_median
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {} |",
+            r.filter,
+            m[0],
+            m[1],
+            m[2],
+            m[3],
+            m[4],
+            r.fps_median,
+            r.cpu_ms_mean.map_or("-".into(), |c| format!("{c:.0}")),
+            r.fps_if_cores_free.map_or("-".into(), |f| format!("{f:.1}"))
         );
     }
     Ok(())

@@ -81,11 +81,16 @@ struct Blas {
 
 impl Blas {
     fn build(mesh: &Mesh, params: &BuildParams) -> Self {
+        Self::build_from(mesh.triangle_count(), |i| mesh.triangle(i), params)
+    }
+
+    /// Builds over triangles `tri(0) .. tri(n - 1)`; `prim_ids` then hold those indices.
+    fn build_from(n: usize, tri: impl Fn(usize) -> [Vec3; 3], params: &BuildParams) -> Self {
         // Triangles with non-finite corners can never be hit; leaving them out keeps the
         // boxes finite (a NaN box would poison every SAH cost above it).
-        let (ids, boxes): (Vec<u32>, Vec<Aabb>) = (0..mesh.triangle_count())
+        let (ids, boxes): (Vec<u32>, Vec<Aabb>) = (0..n)
             .filter_map(|i| {
-                let t = mesh.triangle(i);
+                let t = tri(i);
                 t.iter().all(|p| p.is_finite()).then(|| (i as u32, Aabb::from_points(t)))
             })
             .unzip();
@@ -97,10 +102,8 @@ impl Blas {
             let start = packets.len() as u32;
             let leaf = &order[first as usize..(first + count) as usize];
             for chunk in leaf.chunks(4) {
-                let tris: Vec<_> = chunk
-                    .iter()
-                    .map(|&k| mesh.triangle(ids[k as usize] as usize).map(|v| v.to_array()))
-                    .collect();
+                let tris: Vec<_> =
+                    chunk.iter().map(|&k| tri(ids[k as usize] as usize).map(|v| v.to_array())).collect();
                 packets.push(Tri4::pack(&tris));
                 prim_ids.extend((0..4).map(|l| chunk.get(l).map_or(u32::MAX, |&k| ids[k as usize])));
             }
@@ -113,34 +116,18 @@ impl Blas {
     #[inline(always)]
     fn intersect(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
         let rb = RayBoxes::new(o, d);
-        let wr = WatertightRay::new(o, d);
-        let mut best = None;
-        wide::traverse(&self.nodes, &rb, t_min, t_max, |first, count, t_max| {
-            for i in first..first + count {
-                // SAFETY: leaf ranges lie inside `packets` (checked by `validate`).
-                let p = unsafe { self.packets.get_unchecked(i as usize) };
-                if let Some((t, u, v, lane)) = tri4::intersect4(&wr, p, t_min, *t_max) {
-                    *t_max = t;
-                    best = Some((t, u, v, 4 * i as usize + lane));
-                }
-            }
-            false
-        });
-        best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
+        let mut leaves =
+            ClosestPackets { packets: &self.packets, ray: WatertightRay::new(o, d), t_min, best: None };
+        wide::traverse(&self.nodes, &rb, t_min, t_max, &mut leaves);
+        leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
 
     #[inline(always)]
     fn occluded(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
         let rb = RayBoxes::new(o, d);
-        let wr = WatertightRay::new(o, d);
         let mut t_max = t_max;
-        wide::traverse(&self.nodes, &rb, t_min, &mut t_max, |first, count, t_max| {
-            (first..first + count).any(|i| {
-                // SAFETY: as in `intersect`.
-                let p = unsafe { self.packets.get_unchecked(i as usize) };
-                tri4::occluded4(&wr, p, t_min, *t_max)
-            })
-        })
+        let leaves = AnyPacket { packets: &self.packets, ray: WatertightRay::new(o, d), t_min };
+        wide::traverse(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 
     /// Expected node visits plus packet tests of a random ray through the root box.
@@ -205,6 +192,57 @@ pub struct BvhStats {
     pub sah_cost: f64,
 }
 
+/// Closest-hit leaf test over triangle packets; `best` holds `(t, u, v, 4 packet + lane)`.
+struct ClosestPackets<'a> {
+    packets: &'a [Tri4],
+    ray: WatertightRay,
+    t_min: f32,
+    best: Option<(f32, f32, f32, usize)>,
+}
+
+impl wide::Leaves for &mut ClosestPackets<'_> {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+        for i in first..first + count {
+            // SAFETY: leaf ranges lie inside `packets` (checked by `validate`).
+            let p = unsafe { self.packets.get_unchecked(i as usize) };
+            if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, self.t_min, *t_max) {
+                *t_max = t;
+                self.best = Some((t, u, v, 4 * i as usize + lane));
+            }
+        }
+        false
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, first: u32) {
+        wide::prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    }
+}
+
+/// Any-hit leaf test over triangle packets.
+struct AnyPacket<'a> {
+    packets: &'a [Tri4],
+    ray: WatertightRay,
+    t_min: f32,
+}
+
+impl wide::Leaves for AnyPacket<'_> {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+        (first..first + count).any(|i| {
+            // SAFETY: as in `ClosestPackets`.
+            let p = unsafe { self.packets.get_unchecked(i as usize) };
+            tri4::occluded4(&self.ray, p, self.t_min, *t_max)
+        })
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, first: u32) {
+        wide::prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    }
+}
+
 /// Per-instance data of the top level.
 #[derive(Clone, Debug)]
 struct InstanceRecord {
@@ -243,19 +281,31 @@ pub(crate) fn invert_transform(m: &Affine3A) -> Option<(Affine3A, bool)> {
 /// Acceleration structure over a whole scene: a two-level wide BVH (see the crate docs).
 #[derive(Clone, Debug)]
 pub struct SceneAccel {
-    /// One bottom level per mesh (empty for meshes no instance uses).
+    /// One bottom level per mesh (empty for meshes only merged or unused instances use).
     blas: Vec<Blas>,
+    /// One bottom level over the world-space triangles of all instances whose transform
+    /// was the identity at build time (when there are at least two): scenes loaded as
+    /// one instance per object (the Cornell box has eight) then cost one BVH, not a top
+    /// level plus eight. Its `prim_ids` index `merged_refs`.
+    merged: Blas,
+    /// `(instance, prim)` of each triangle of `merged`.
+    merged_refs: Vec<(u32, u32)>,
+    /// Per scene instance: part of `merged`.
+    is_merged: Vec<bool>,
     /// One record per scene instance, in scene order.
     instances: Vec<InstanceRecord>,
     /// Top level over the hittable instances.
     tlas: Vec<Node4>,
-    /// Instance indices in top-level leaf order.
+    /// Objects in top-level leaf order: an instance index, or [`MERGED`].
     tlas_order: Vec<u32>,
-    /// The only hittable instance, when there is exactly one: the top level is skipped.
+    /// The only hittable object, when there is exactly one: the top level is skipped.
     single: Option<u32>,
     triangle_count: usize,
     params: BuildParams,
 }
+
+/// Top-level object id of the merged identity instances.
+const MERGED: u32 = u32::MAX;
 
 impl SceneAccel {
     /// Builds with the default parameters ([`BuildParams::balanced`]).
@@ -266,8 +316,32 @@ impl SceneAccel {
     /// Builds both levels with `params`. Bottom levels of different meshes are built in
     /// parallel, and large meshes build their subtrees in parallel.
     pub fn build_with(scene: &Scene, params: &BuildParams) -> Self {
+        let mesh_of = |i: &filtrace_scene::Instance| scene.meshes.get(i.mesh as usize);
+        let mut is_merged: Vec<bool> = scene
+            .instances
+            .iter()
+            .map(|i| i.transform == Affine3A::IDENTITY && mesh_of(i).is_some_and(|m| m.triangle_count() > 0))
+            .collect();
+        if is_merged.iter().filter(|&&m| m).count() < 2 {
+            is_merged.fill(false);
+        }
+        let merged_refs: Vec<(u32, u32)> = (0..scene.instances.len())
+            .filter(|&i| is_merged[i])
+            .flat_map(|i| {
+                (0..mesh_of(&scene.instances[i]).map_or(0, |m| m.triangle_count()))
+                    .map(move |p| (i as u32, p as u32))
+            })
+            .collect();
+        let merged = Blas::build_from(
+            merged_refs.len(),
+            |k| {
+                let (i, p) = merged_refs[k];
+                scene.meshes[scene.instances[i as usize].mesh as usize].triangle(p as usize)
+            },
+            params,
+        );
         let mut used = vec![false; scene.meshes.len()];
-        for inst in &scene.instances {
+        for (inst, _) in scene.instances.iter().zip(&is_merged).filter(|(_, &m)| !m) {
             if let Some(u) = used.get_mut(inst.mesh as usize) {
                 *u = true;
             }
@@ -280,6 +354,9 @@ impl SceneAccel {
             .collect();
         let mut accel = Self {
             blas,
+            merged,
+            merged_refs,
+            is_merged,
             instances: Vec::new(),
             tlas: Vec::new(),
             tlas_order: Vec::new(),
@@ -296,11 +373,18 @@ impl SceneAccel {
     }
 
     /// Rebuilds only the top level from the instances' current transforms. When instances
-    /// were added, removed or re-pointed at other meshes, everything is rebuilt instead.
+    /// were added, removed or re-pointed at other meshes, or an instance merged at build
+    /// time (identity transform) moved, everything is rebuilt instead; after that rebuild
+    /// the moved instance has its own entry and later moves are top-level only again.
     pub fn update_transforms(&mut self, scene: &Scene) {
         let same_structure = scene.instances.len() == self.instances.len()
             && scene.meshes.len() == self.blas.len()
-            && scene.instances.iter().zip(&self.instances).all(|(a, b)| a.mesh == b.mesh);
+            && scene.instances.iter().zip(&self.instances).all(|(a, b)| a.mesh == b.mesh)
+            && scene
+                .instances
+                .iter()
+                .zip(&self.is_merged)
+                .all(|(a, &m)| !m || a.transform == Affine3A::IDENTITY);
         if !same_structure {
             *self = Self::build_with(scene, &self.params.clone());
             return;
@@ -316,10 +400,11 @@ impl SceneAccel {
         self.instances = scene
             .instances
             .iter()
-            .map(|inst| {
+            .zip(&self.is_merged)
+            .map(|(inst, &merged)| {
                 let blas = self.blas.get(inst.mesh as usize);
                 match (blas, invert_transform(&inst.transform)) {
-                    (Some(b), Some((inv, identity))) if b.tri_count > 0 => InstanceRecord {
+                    (Some(b), Some((inv, identity))) if b.tri_count > 0 && !merged => InstanceRecord {
                         mesh: inst.mesh,
                         world_to_object: inv,
                         identity,
@@ -339,18 +424,29 @@ impl SceneAccel {
             .iter()
             .map(|i| scene.meshes.get(i.mesh as usize).map_or(0, |m| m.triangle_count()))
             .sum();
-        let live: Vec<u32> = (0..self.instances.len() as u32)
+        let mut objects: Vec<u32> = (0..self.instances.len() as u32)
             .filter(|&i| !self.instances[i as usize].bounds.is_empty())
             .collect();
-        let boxes: Vec<Aabb> = live.iter().map(|&i| self.instances[i as usize].bounds).collect();
+        if self.merged.tri_count > 0 {
+            objects.push(MERGED);
+        }
+        let boxes: Vec<Aabb> = objects.iter().map(|&o| self.object_bounds(o)).collect();
         let (root, order) = sah::build_binary(
             &boxes,
             &BuildParams { max_leaf_size: 2, leaf_block: 1, ..self.params.clone() },
         );
         self.tlas =
             root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
-        self.tlas_order = order.iter().map(|&k| live[k as usize]).collect();
-        self.single = (live.len() == 1).then(|| live[0]);
+        self.tlas_order = order.iter().map(|&k| objects[k as usize]).collect();
+        self.single = (objects.len() == 1).then(|| objects[0]);
+    }
+
+    fn object_bounds(&self, object: u32) -> Aabb {
+        if object == MERGED {
+            self.merged.bounds
+        } else {
+            self.instances[object as usize].bounds
+        }
     }
 
     /// Size and shape of the bottom levels, summed over meshes (for benchmarks and tuning).
@@ -363,6 +459,12 @@ impl SceneAccel {
             st.leaves += b.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
             st.sah_cost += b.sah_cost();
         }
+        let m = &self.merged;
+        st.nodes += m.nodes.len();
+        st.packets += m.packets.len();
+        st.triangles += m.tri_count;
+        st.leaves += m.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
+        st.sah_cost += m.sah_cost();
         st
     }
 
@@ -378,15 +480,15 @@ impl SceneAccel {
             return None;
         }
         let mut t_max = ray.t_max;
-        if let Some(i) = self.single {
-            return self.intersect_instance(i, ray, &mut t_max);
+        if let Some(o) = self.single {
+            return self.intersect_object(o, ray, &mut t_max);
         }
         let mut best = None;
         let rb = RayBoxes::new(ray.origin, ray.dir);
-        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first, count, t_max| {
+        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first: u32, count: u32, t_max: &mut f32| {
             for k in first..first + count {
-                let inst = self.tlas_order[k as usize];
-                if let Some(h) = self.intersect_instance(inst, ray, t_max) {
+                let object = self.tlas_order[k as usize];
+                if let Some(h) = self.intersect_object(object, ray, t_max) {
                     best = Some(h);
                 }
             }
@@ -400,18 +502,24 @@ impl SceneAccel {
         if !ray.is_valid() {
             return false;
         }
-        if let Some(i) = self.single {
-            return self.occluded_instance(i, ray);
+        if let Some(o) = self.single {
+            return self.occluded_object(o, ray);
         }
         let rb = RayBoxes::new(ray.origin, ray.dir);
         let mut t_max = ray.t_max;
-        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first, count, _| {
-            (first..first + count).any(|k| self.occluded_instance(self.tlas_order[k as usize], ray))
+        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first: u32, count: u32, _: &mut f32| {
+            (first..first + count).any(|k| self.occluded_object(self.tlas_order[k as usize], ray))
         })
     }
 
     #[inline(always)]
-    fn intersect_instance(&self, inst: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
+    fn intersect_object(&self, object: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
+        if object == MERGED {
+            let (t, u, v, k) = self.merged.intersect(ray.origin, ray.dir, ray.t_min, t_max)?;
+            let (instance, prim) = self.merged_refs[k as usize];
+            return Some(Hit { t, u, v, instance, prim });
+        }
+        let inst = object;
         let rec = &self.instances[inst as usize];
         let (o, d) = object_ray(&rec.world_to_object, rec.identity, ray)?;
         let (t, u, v, prim) = self.blas[rec.mesh as usize].intersect(o, d, ray.t_min, t_max)?;
@@ -419,8 +527,11 @@ impl SceneAccel {
     }
 
     #[inline(always)]
-    fn occluded_instance(&self, inst: u32, ray: &Ray) -> bool {
-        let rec = &self.instances[inst as usize];
+    fn occluded_object(&self, object: u32, ray: &Ray) -> bool {
+        if object == MERGED {
+            return self.merged.occluded(ray.origin, ray.dir, ray.t_min, ray.t_max);
+        }
+        let rec = &self.instances[object as usize];
         object_ray(&rec.world_to_object, rec.identity, ray)
             .is_some_and(|(o, d)| self.blas[rec.mesh as usize].occluded(o, d, ray.t_min, ray.t_max))
     }
@@ -431,13 +542,13 @@ impl SceneAccel {
         for (m, b) in self.blas.iter().enumerate() {
             b.validate().map_err(|e| format!("mesh {m}: {e}"))?;
         }
-        let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count();
+        self.merged.validate().map_err(|e| format!("merged identity instances: {e}"))?;
+        let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count()
+            + (self.merged.tri_count > 0) as usize;
         if self.tlas_order.len() != live {
-            return Err(format!("top level holds {} instances, {live} are hittable", self.tlas_order.len()));
+            return Err(format!("top level holds {} objects, {live} are hittable", self.tlas_order.len()));
         }
-        wide::validate(&self.tlas, self.tlas_order.len(), |k| {
-            self.instances[self.tlas_order[k] as usize].bounds
-        })
-        .map_err(|e| format!("top level: {e}"))
+        wide::validate(&self.tlas, self.tlas_order.len(), |k| self.object_bounds(self.tlas_order[k]))
+            .map_err(|e| format!("top level: {e}"))
     }
 }

@@ -281,3 +281,28 @@ fn hit_distance_is_in_units_of_the_unnormalised_direction() {
     assert!(!accel.occluded(&Ray::segment(Vec3::new(0.3, 0.1, -10.0), Vec3::Z * 0.5, 0.0, 11.9)));
     assert!(accel.occluded(&Ray::segment(Vec3::new(0.3, 0.1, -10.0), Vec3::Z * 0.5, 0.0, 12.1)));
 }
+
+/// Several identity instances (merged into one bottom level, as loaders produce one
+/// instance per object) next to transformed ones; then a merged instance moves.
+#[test]
+fn merged_identity_instances_match_brute_force_and_survive_moves() {
+    let mut scene = instanced_scene();
+    scene.meshes.push(testmesh::icosphere(1));
+    let mut shifted = testmesh::subdivided_cube(2);
+    shifted.positions.iter_mut().for_each(|p| *p = *p * 0.5 + Vec3::new(0.0, 2.5, 0.0));
+    scene.meshes.push(shifted);
+    for mesh in [3, 4] {
+        scene.instances.push(Instance { mesh, transform: Affine3A::IDENTITY, material_override: None });
+    }
+    check_scene(&scene, 2000, 8);
+    let mut accel = SceneAccel::build(&scene);
+    scene.instances[5].transform = Affine3A::from_translation(Vec3::new(0.0, 0.0, 3.0));
+    accel.update_transforms(&scene);
+    let brute = BruteForce::build(&scene);
+    for ray in random_rays(&scene, 2000, 9) {
+        check_ray(&accel, &brute, &ray).unwrap();
+    }
+    let h = accel.intersect(&Ray::new(Vec3::new(0.0, 0.0, 10.0), -Vec3::Z)).unwrap();
+    assert_eq!(h.instance, 5);
+    assert!((h.t - 6.0).abs() < 1e-4, "{h:?}");
+}

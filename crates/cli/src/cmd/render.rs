@@ -380,9 +380,11 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     }
     if cancelled {
         eprintln!(
-            "cancelled: wrote the {} spp rendered so far (of {}) to {}",
+            "cancelled: wrote what was rendered ({} to {} of {} spp per pixel, {:.2} on average) to {}",
             summary.spp_done,
+            film.pixels().iter().map(|p| p.samples).max().unwrap_or(0),
             settings.spp,
+            samples as f64 / pixels as f64,
             written.exr.display()
         );
         return Err(Interrupted.into());

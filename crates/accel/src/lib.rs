@@ -118,7 +118,7 @@ impl Blas {
         let rb = RayBoxes::new(o, d);
         let mut leaves =
             ClosestPackets { packets: &self.packets, ray: WatertightRay::new(o, d), t_min, best: None };
-        wide::traverse(&self.nodes, &rb, t_min, t_max, &mut leaves);
+        wide::traverse::<_, true>(&self.nodes, &rb, t_min, t_max, &mut leaves);
         leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
 
@@ -127,7 +127,7 @@ impl Blas {
         let rb = RayBoxes::new(o, d);
         let mut t_max = t_max;
         let leaves = AnyPacket { packets: &self.packets, ray: WatertightRay::new(o, d), t_min };
-        wide::traverse(&self.nodes, &rb, t_min, &mut t_max, leaves)
+        wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 
     /// Expected node visits plus packet tests of a random ray through the root box.
@@ -485,15 +485,21 @@ impl SceneAccel {
         }
         let mut best = None;
         let rb = RayBoxes::new(ray.origin, ray.dir);
-        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first: u32, count: u32, t_max: &mut f32| {
-            for k in first..first + count {
-                let object = self.tlas_order[k as usize];
-                if let Some(h) = self.intersect_object(object, ray, t_max) {
-                    best = Some(h);
+        wide::traverse::<_, true>(
+            &self.tlas,
+            &rb,
+            ray.t_min,
+            &mut t_max,
+            |first: u32, count: u32, t_max: &mut f32| {
+                for k in first..first + count {
+                    let object = self.tlas_order[k as usize];
+                    if let Some(h) = self.intersect_object(object, ray, t_max) {
+                        best = Some(h);
+                    }
                 }
-            }
-            false
-        });
+                false
+            },
+        );
         best
     }
 
@@ -507,9 +513,15 @@ impl SceneAccel {
         }
         let rb = RayBoxes::new(ray.origin, ray.dir);
         let mut t_max = ray.t_max;
-        wide::traverse(&self.tlas, &rb, ray.t_min, &mut t_max, |first: u32, count: u32, _: &mut f32| {
-            (first..first + count).any(|k| self.occluded_object(self.tlas_order[k as usize], ray))
-        })
+        wide::traverse::<_, false>(
+            &self.tlas,
+            &rb,
+            ray.t_min,
+            &mut t_max,
+            |first: u32, count: u32, _: &mut f32| {
+                (first..first + count).any(|k| self.occluded_object(self.tlas_order[k as usize], ray))
+            },
+        )
     }
 
     #[inline(always)]

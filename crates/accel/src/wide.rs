@@ -249,10 +249,11 @@ impl<F: FnMut(u32, u32, &mut f32) -> bool> Leaves for F {
     }
 }
 
-/// Visits, near-first, every leaf whose box the ray `[t_min, *t_max]` touches, calling
+/// Visits every leaf whose box the ray `[t_min, *t_max]` touches, calling
 /// `leaves.visit(first, count, t_max)`; returns `true` when a visit asked to stop.
+/// `ORDERED`: visit hit children near-first (closest hit); any-hit queries skip the sort.
 #[inline(always)]
-pub(crate) fn traverse<L: Leaves>(
+pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
     nodes: &[Node4],
     r: &RayBoxes,
     t_min: f32,
@@ -285,6 +286,17 @@ pub(crate) fn traverse<L: Leaves>(
                     }
                 }
                 if rest == 0 {
+                    cur = e(first);
+                    continue;
+                }
+                if !ORDERED {
+                    let mut bits = rest;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        stack[sp] = MaybeUninit::new(e(i));
+                        sp += 1;
+                    }
                     cur = e(first);
                     continue;
                 }

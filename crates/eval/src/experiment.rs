@@ -57,9 +57,6 @@ pub struct ExperimentSpec {
     pub reference: ReferenceSpec,
     pub scenes: Vec<SceneSpec>,
     pub methods: Vec<MethodSpec>,
-    /// Intel Open Image Denoise on the noisy frame of each method of filter "none".
-    #[serde(default)]
-    pub oidn: Option<OidnSpec>,
 }
 
 fn default_max_depth() -> i32 {
@@ -122,14 +119,6 @@ impl MethodSpec {
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OidnSpec {
-    /// Path of `oidnDenoise` (default: `$OIDN_DENOISE`, then `oidnDenoise` on PATH).
-    #[serde(default)]
-    pub executable: Option<PathBuf>,
-}
-
 impl ExperimentSpec {
     /// Parses and checks a spec.
     pub fn from_toml(text: &str) -> Result<Self, String> {
@@ -186,10 +175,13 @@ impl ExperimentSpec {
         Ok(())
     }
 
-    /// The stable hash of everything that determines a scene's reference.
-    pub fn reference_key(&self, scene: &SceneSpec, backend_tag: &str) -> String {
+    /// The stable hash of everything that determines a scene's reference: the renderer
+    /// (`backend_tag`), the scene's content (`scene_fingerprint`, e.g. a hash of the loaded
+    /// scene, so that an edited scene file or built-in is never judged against a stale
+    /// reference) and the reference settings.
+    pub fn reference_key(&self, scene: &SceneSpec, backend_tag: &str, scene_fingerprint: &str) -> String {
         let text = format!(
-            "v{CACHE_VERSION}|{backend_tag}|{}|{}x{}|spp{}|depth{}|seed{}",
+            "v{CACHE_VERSION}|{backend_tag}|{}|{scene_fingerprint}|{}x{}|spp{}|depth{}|seed{}",
             scene.name,
             self.width,
             self.height,
@@ -229,6 +221,8 @@ pub struct MethodRun {
 pub trait Backend {
     /// Identifies the renderer version in reference cache keys.
     fn tag(&self) -> String;
+    /// Identifies the content of `scene` in reference cache keys (a hash of the loaded scene).
+    fn scene_fingerprint(&mut self, scene: &SceneSpec) -> Result<String, String>;
     /// Renders the reference of `scene`.
     fn render_reference(&mut self, spec: &ExperimentSpec, scene: &SceneSpec) -> Result<Image, String>;
     /// Reads a reference image file (EXR).
@@ -340,7 +334,8 @@ pub fn run_experiment(
                 (backend.load_reference(&p)?, format!("file {}", f.display()))
             }
             None => {
-                let key = spec.reference_key(scene, &backend.tag());
+                let fingerprint = backend.scene_fingerprint(scene)?;
+                let key = spec.reference_key(scene, &backend.tag(), &fingerprint);
                 let path = cache.join(format!("{sname}-{key}.pfm"));
                 match crate::pfm::read_pfm(&path) {
                     Ok(img) if img.width() == spec.width as usize && img.height() == spec.height as usize => {

@@ -24,6 +24,9 @@ impl Backend for Fake {
     fn tag(&self) -> String {
         "fake-1".into()
     }
+    fn scene_fingerprint(&mut self, s: &SceneSpec) -> Result<String, String> {
+        Ok(format!("fake:{}", s.name))
+    }
     fn render_reference(&mut self, spec: &ExperimentSpec, _s: &SceneSpec) -> Result<Image, String> {
         self.reference_renders += 1;
         Ok(gradient(spec.width as usize, spec.height as usize))
@@ -132,19 +135,20 @@ fn tiny_spec_end_to_end_with_reference_cache() {
 fn cache_key_follows_the_reference_settings() {
     let spec = ExperimentSpec::from_toml(SPEC).unwrap();
     let s = &spec.scenes[0];
-    let k = spec.reference_key(s, "a");
-    assert_eq!(k, spec.reference_key(s, "a"));
-    assert_ne!(k, spec.reference_key(s, "b"));
+    let k = spec.reference_key(s, "a", "f");
+    assert_eq!(k, spec.reference_key(s, "a", "f"));
+    assert_ne!(k, spec.reference_key(s, "b", "f"));
+    assert_ne!(k, spec.reference_key(s, "a", "g"), "an edited scene needs a new reference");
     let mut more = spec.clone();
     more.reference.spp = 16;
-    assert_ne!(k, more.reference_key(s, "a"));
+    assert_ne!(k, more.reference_key(s, "a", "f"));
     let mut bigger = spec.clone();
     bigger.width = 32;
-    assert_ne!(k, bigger.reference_key(s, "a"));
+    assert_ne!(k, bigger.reference_key(s, "a", "f"));
     // Methods do not change the reference.
     let mut fewer = spec.clone();
     fewer.methods.pop();
-    assert_eq!(k, fewer.reference_key(s, "a"));
+    assert_eq!(k, fewer.reference_key(s, "a", "f"));
 }
 
 #[test]

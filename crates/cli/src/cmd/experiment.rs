@@ -60,6 +60,16 @@ impl Backend for PipelineBackend {
         format!("filtrace-path-{}", env!("CARGO_PKG_VERSION"))
     }
 
+    fn scene_fingerprint(&mut self, scene: &SceneSpec) -> Result<String, String> {
+        // Everything the renderer reads is plain data with a Debug form: hash that.
+        let s = self.scene(&scene.name)?;
+        let text = format!(
+            "{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+            s.meshes, s.instances, s.materials, s.textures, s.lights, s.camera
+        );
+        Ok(format!("{:016x}", filtrace_eval::experiment::fnv1a64(text.as_bytes())))
+    }
+
     fn render_reference(&mut self, spec: &ExperimentSpec, scene: &SceneSpec) -> Result<Image, String> {
         let settings = RenderSettings {
             width: spec.width,

@@ -1,4 +1,4 @@
-//! `grass`: a 10 m x 10 m meadow of thin, curved grass blades (16,000 blades, 5 triangles
+//! `grass`: a 10 m x 10 m meadow (on 40 m of soil) of thin, curved grass blades (16,000 blades, 5 triangles
 //! each) around two rocks, lit by a large warm area light and a blue sky. Geometry
 //! finer than a pixel at most distances: the case where screen-space filters, which trust
 //! normals and depth, struggle. Deterministic (fixed seed). Units are metres.
@@ -26,7 +26,8 @@ pub fn grass() -> Scene {
 
     let mut ground = shapes::quad(soil);
     ground.name = "ground".into();
-    ground.positions.iter_mut().for_each(|p| *p *= 10.0);
+    // 40 m of soil, so that no gap to the sky's ground colour shows near the horizon.
+    ground.positions.iter_mut().for_each(|p| *p *= 40.0);
     s.add_mesh(ground);
 
     s.add_mesh(blades(BLADES, SEED, [blade_a, blade_b]));
@@ -61,8 +62,8 @@ pub fn grass() -> Scene {
         ground: Rgb::splat(0.1),
     }));
     s.camera = Some(Camera {
-        eye: Vec3::new(0.0, 1.4, 6.0),
-        target: Vec3::new(0.0, 0.1, 0.0),
+        eye: Vec3::new(0.0, 2.4, 5.5),
+        target: Vec3::new(0.0, 0.0, -0.5),
         up: Vec3::Y,
         vfov_deg: 40.0,
     });

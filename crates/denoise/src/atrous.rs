@@ -16,6 +16,7 @@
 use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, from_planes, to_planes, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
+use crate::pool::Buf;
 use filtrace_core::Image;
 use serde::{Deserialize, Serialize};
 
@@ -154,7 +155,7 @@ pub fn atrous_into(
     }
     let (mut src, valid) = to_planes(color);
     let n = color.pixel_count();
-    let mut dst: Planes3 = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    let mut dst: Planes3 = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
     for i in 0..params.iterations {
         // Level 0 reads invalid (non-finite) colours as absent; every later level is valid.
         let v = if i == 0 { Some(&valid[..]) } else { None };

@@ -9,6 +9,7 @@
 use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, from_planes, to_planes, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
+use crate::pool::Buf;
 use filtrace_core::Image;
 use serde::{Deserialize, Serialize};
 
@@ -128,7 +129,7 @@ pub fn bilateral_into(
         src
     };
     let n = color.pixel_count();
-    let mut dst: Planes3 = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    let mut dst: Planes3 = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
     let terms = RangeTerms {
         inv_color: params.sigma_color.map(|s| 1.0 / (s * s)),
         inv_normal: params.sigma_normal.map(|s| 1.0 / (s * s)),

@@ -11,6 +11,7 @@
 //! Bands run in parallel; each starts by summing its first window directly (cost `2r+1`
 //! rows), the price of independence between bands.
 
+use crate::simd::Isa;
 use rayon::prelude::*;
 
 /// Rows per parallel band: at least 64 (so the `2r+1` start-up rows stay a small share),
@@ -20,141 +21,150 @@ fn band_rows(h: usize) -> usize {
     h.div_ceil(2 * threads).max(64)
 }
 
-#[inline(always)]
-fn add_row<const K: usize>(col: &mut [[f32; K]], row: &[[f32; K]]) {
-    for (c, r) in col.iter_mut().zip(row) {
-        for k in 0..K {
-            c[k] += r[k];
-        }
-    }
+/// The per-pixel quantities of a box pass and what to do with their window sums.
+/// Implemented by structs (not closures) so that `#[inline(always)]` pulls both into the
+/// AVX2 build of [`box_sums`].
+pub(crate) trait BoxPass<const K: usize>: Sync {
+    /// The quantities of pixel `(x, y)`.
+    fn quantities(&self, x: usize, y: usize) -> [f32; K];
+    /// Uses `sums[i]`, the window sums around `(x0 + i, y)`, to write `out` (the output
+    /// values of those pixels).
+    fn consume(&self, x0: usize, y: usize, sums: &[[f32; K]], out: &mut [f32]);
 }
 
-#[inline(always)]
-fn sub_row<const K: usize>(col: &mut [[f32; K]], row: &[[f32; K]]) {
-    for (c, r) in col.iter_mut().zip(row) {
-        for k in 0..K {
-            c[k] -= r[k];
-        }
-    }
-}
-
-/// `win[x] = sum of col[x-r ..= x+r]` clipped to the row.
-#[inline(always)]
-fn horizontal<const K: usize>(col: &[[f32; K]], r: usize, win: &mut [[f32; K]]) {
-    let w = col.len();
-    let mut acc = [0.0f32; K];
-    for c in &col[..(r + 1).min(w)] {
-        for k in 0..K {
-            acc[k] += c[k];
-        }
-    }
-    for x in 0..w {
-        win[x] = acc;
-        if x + r + 1 < w {
-            for k in 0..K {
-                acc[k] += col[x + r + 1][k];
-            }
-        }
-        if x >= r {
-            for k in 0..K {
-                acc[k] -= col[x - r][k];
-            }
-        }
-    }
-}
+/// Pixels per horizontal chunk: the chunk's window sums (`CHUNK * K` floats) stay in L1
+/// between the running sum and `consume`.
+const CHUNK: usize = 64;
 
 /// The work of one band of rows `y0..y1`; `out` holds the band's rows (`out_stride` values
 /// per pixel).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn band<const K: usize, P, C>(
+fn band<const K: usize, B: BoxPass<K>>(
     w: usize,
     h: usize,
     r: usize,
     y0: usize,
     out: &mut [f32],
     out_stride: usize,
-    produce: &P,
-    consume: &C,
-) where
-    P: Fn(usize, &mut [[f32; K]]),
-    C: Fn(usize, &[[f32; K]], &mut [f32]),
-{
+    pass: &B,
+) {
     let rows = out.len() / (w * out_stride);
     let y1 = y0 + rows;
+    // Column sums of the window rows around the current row.
     let mut col = vec![[0.0f32; K]; w];
-    let mut row = vec![[0.0f32; K]; w];
-    let mut win = vec![[0.0f32; K]; w];
+    let mut win = [[0.0f32; K]; CHUNK];
     for yy in y0.saturating_sub(r)..=(y0 + r).min(h - 1) {
-        produce(yy, &mut row);
-        add_row(&mut col, &row);
+        for (x, c) in col.iter_mut().enumerate() {
+            let q = pass.quantities(x, yy);
+            for k in 0..K {
+                c[k] += q[k];
+            }
+        }
     }
     for (y, out_row) in (y0..y1).zip(out.chunks_exact_mut(w * out_stride)) {
-        horizontal(&col, r, &mut win);
-        consume(y, &win, out_row);
-        if y + 1 < y1 {
-            if y + r + 1 < h {
-                produce(y + r + 1, &mut row);
-                add_row(&mut col, &row);
+        // Horizontal running sum of the column sums, consumed chunk by chunk.
+        let mut acc = [0.0f32; K];
+        for c in &col[..(r + 1).min(w)] {
+            for k in 0..K {
+                acc[k] += c[k];
             }
-            if y >= r {
-                produce(y - r, &mut row);
-                sub_row(&mut col, &row);
+        }
+        for xs in (0..w).step_by(CHUNK) {
+            let xe = (xs + CHUNK).min(w);
+            for x in xs..xe {
+                win[x - xs] = acc;
+                if x + r + 1 < w {
+                    let c = &col[x + r + 1];
+                    for k in 0..K {
+                        acc[k] += c[k];
+                    }
+                }
+                if x >= r {
+                    let c = &col[x - r];
+                    for k in 0..K {
+                        acc[k] -= c[k];
+                    }
+                }
+            }
+            pass.consume(xs, y, &win[..xe - xs], &mut out_row[xs * out_stride..xe * out_stride]);
+        }
+        // Slide the window down: add row y + r + 1, remove row y - r.
+        if y + 1 < y1 {
+            let (enter, leave) = (y + r + 1 < h, y >= r);
+            for (x, c) in col.iter_mut().enumerate() {
+                if enter {
+                    let q = pass.quantities(x, y + r + 1);
+                    for k in 0..K {
+                        c[k] += q[k];
+                    }
+                }
+                if leave {
+                    let q = pass.quantities(x, y - r);
+                    for k in 0..K {
+                        c[k] -= q[k];
+                    }
+                }
             }
         }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
-#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn band_avx2<const K: usize, P, C>(
+unsafe fn band_avx2<const K: usize, B: BoxPass<K>>(
     w: usize,
     h: usize,
     r: usize,
     y0: usize,
     out: &mut [f32],
     out_stride: usize,
-    produce: &P,
-    consume: &C,
-) where
-    P: Fn(usize, &mut [[f32; K]]),
-    C: Fn(usize, &[[f32; K]], &mut [f32]),
-{
-    band::<K, P, C>(w, h, r, y0, out, out_stride, produce, consume)
+    pass: &B,
+) {
+    band::<K, B>(w, h, r, y0, out, out_stride, pass)
 }
 
-/// Calls `consume(y, sums, out_row)` for every row `y`, where `sums[x][k]` is the sum of
-/// quantity `k` over the window of radius `r` around `(x, y)` clipped to the `w x h` image,
-/// and `produce(y, row)` fills `row[x]` with the quantities of pixel `(x, y)`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn band_avx512<const K: usize, B: BoxPass<K>>(
+    w: usize,
+    h: usize,
+    r: usize,
+    y0: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    pass: &B,
+) {
+    band::<K, B>(w, h, r, y0, out, out_stride, pass)
+}
+
+/// Calls `pass.consume(y, sums, out_row)` for every row `y`, where `sums[x][k]` is the sum
+/// of quantity `k` over the window of radius `r` around `(x, y)` clipped to the `w x h`
+/// image, and `pass.produce(y, row)` fills `row[x]` with the quantities of pixel `(x, y)`.
 /// `out` has `out_stride` values per pixel; `out_row` is row `y` of it.
-pub(crate) fn box_sums<const K: usize, P, C>(
+pub(crate) fn box_sums<const K: usize, B: BoxPass<K>>(
     w: usize,
     h: usize,
     r: usize,
     out: &mut [f32],
     out_stride: usize,
-    produce: P,
-    consume: C,
-) where
-    P: Fn(usize, &mut [[f32; K]]) + Sync,
-    C: Fn(usize, &[[f32; K]], &mut [f32]) + Sync,
-{
+    pass: &B,
+) {
     assert_eq!(out.len(), w * h * out_stride, "box_sums: output size");
     if w == 0 || h == 0 {
         return;
     }
     let rows = band_rows(h);
-    let avx2 = crate::simd::has_avx2();
+    let isa = crate::simd::isa();
     out.par_chunks_mut(rows * w * out_stride).enumerate().for_each(|(b, chunk)| {
         #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: `avx2` is true only when AVX2 and FMA were detected on this CPU.
-            unsafe { band_avx2::<K, P, C>(w, h, r, b * rows, chunk, out_stride, &produce, &consume) };
-            return;
+        match isa {
+            // SAFETY: `isa()` reports Avx512 / Avx2 only when those features were detected.
+            Isa::Avx512 => return unsafe { band_avx512::<K, B>(w, h, r, b * rows, chunk, out_stride, pass) },
+            Isa::Avx2 => return unsafe { band_avx2::<K, B>(w, h, r, b * rows, chunk, out_stride, pass) },
+            Isa::Base => {}
         }
-        let _ = avx2;
-        band::<K, P, C>(w, h, r, b * rows, chunk, out_stride, &produce, &consume)
+        let _ = isa;
+        band::<K, B>(w, h, r, b * rows, chunk, out_stride, pass)
     });
 }
 
@@ -172,20 +182,19 @@ mod tests {
         };
         for &(w, h, r) in &[(13, 7, 2), (40, 150, 5), (9, 11, 20), (1, 1, 3), (70, 200, 0), (100, 131, 33)] {
             let data: Vec<[f32; 2]> = (0..w * h).map(|_| [rnd(), rnd() * 10.0 - 5.0]).collect();
-            let mut out = vec![0.0f32; w * h * 2];
-            box_sums::<2, _, _>(
-                w,
-                h,
-                r,
-                &mut out,
-                2,
-                |y, row| row.copy_from_slice(&data[y * w..(y + 1) * w]),
-                |_, sums, out_row| {
+            struct Copy<'a>(&'a [[f32; 2]], usize);
+            impl BoxPass<2> for Copy<'_> {
+                fn quantities(&self, x: usize, y: usize) -> [f32; 2] {
+                    self.0[y * self.1 + x]
+                }
+                fn consume(&self, _: usize, _: usize, sums: &[[f32; 2]], out_row: &mut [f32]) {
                     for (o, s) in out_row.chunks_exact_mut(2).zip(sums) {
                         o.copy_from_slice(s);
                     }
-                },
-            );
+                }
+            }
+            let mut out = vec![0.0f32; w * h * 2];
+            box_sums::<2, _>(w, h, r, &mut out, 2, &Copy(&data, w));
             for y in 0..h {
                 for x in 0..w {
                     let mut s = [0.0f64; 2];

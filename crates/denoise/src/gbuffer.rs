@@ -9,7 +9,12 @@
 //!   neighbour, and its own output is rebuilt from valid neighbours (0 when there are none).
 
 use crate::error::DenoiseError;
+use crate::pool::Buf;
 use filtrace_core::Image;
+use rayon::prelude::*;
+
+/// Pixels per parallel work item of the per-pixel conversions.
+const PAR_CHUNK: usize = 16 * 1024;
 
 /// The guide images of one frame, all of the colour image's size.
 #[derive(Clone, Debug)]
@@ -106,33 +111,42 @@ pub(crate) fn check_color(color: &Image) -> Result<(), DenoiseError> {
 }
 
 /// Three planes of `w * h` values.
-pub(crate) type Planes3 = [Vec<f32>; 3];
+pub(crate) type Planes3 = [Buf; 3];
 
 /// Splits an interleaved 3-channel image into planes, replacing non-finite values by 0.
 /// Returns the planes and a validity plane (1 where all three values were finite).
-pub(crate) fn to_planes(im: &Image) -> (Planes3, Vec<f32>) {
+pub(crate) fn to_planes(im: &Image) -> (Planes3, Buf) {
     let n = im.pixel_count();
-    let mut p = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-    let mut valid = vec![1.0; n];
-    for (i, px) in im.data().chunks_exact(3).enumerate() {
-        if px.iter().all(|v| v.is_finite()) {
-            p[0][i] = px[0];
-            p[1][i] = px[1];
-            p[2][i] = px[2];
-        } else {
-            valid[i] = 0.0;
-        }
-    }
+    let mut p = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+    let mut valid = Buf::uninit(n);
+    let [p0, p1, p2] = &mut p;
+    p0.par_chunks_mut(PAR_CHUNK)
+        .zip(p1.par_chunks_mut(PAR_CHUNK))
+        .zip(p2.par_chunks_mut(PAR_CHUNK))
+        .zip(valid.par_chunks_mut(PAR_CHUNK))
+        .zip(im.data().par_chunks(3 * PAR_CHUNK))
+        .for_each(|((((a, b), c), v), src)| {
+            for (i, px) in src.chunks_exact(3).enumerate() {
+                let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+                a[i] = if ok { px[0] } else { 0.0 };
+                b[i] = if ok { px[1] } else { 0.0 };
+                c[i] = if ok { px[2] } else { 0.0 };
+                v[i] = if ok { 1.0 } else { 0.0 };
+            }
+        });
     (p, valid)
 }
 
 /// Interleaves three planes into `out` (3 channels, same pixel count).
 pub(crate) fn from_planes(p: &Planes3, out: &mut Image) {
-    for (i, px) in out.data_mut().chunks_exact_mut(3).enumerate() {
-        px[0] = p[0][i];
-        px[1] = p[1][i];
-        px[2] = p[2][i];
-    }
+    out.data_mut().par_chunks_mut(3 * PAR_CHUNK).enumerate().for_each(|(k, dst)| {
+        let o = k * PAR_CHUNK;
+        for (i, px) in dst.chunks_exact_mut(3).enumerate() {
+            px[0] = p[0][o + i];
+            px[1] = p[1][o + i];
+            px[2] = p[2][o + i];
+        }
+    });
 }
 
 /// The sanitised planar guides the filters run on.
@@ -145,32 +159,40 @@ pub(crate) struct Guides {
     /// given; `None` when neither is.
     pub position: Option<Planes3>,
     /// Depth divided by the depth scale (about `[0, 1]`), when depth is given.
-    pub depth: Option<Vec<f32>>,
+    pub depth: Option<Buf>,
     /// 1 on surface pixels, 0 on background.
-    pub surface: Vec<f32>,
+    pub surface: Buf,
 }
 
 impl Guides {
     pub fn new(g: &GBuffer, width: usize, height: usize) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
         let n = width * height;
-        let mut normal = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        let mut surface = vec![0.0; n];
-        for (i, px) in g.normal.data().chunks_exact(3).enumerate() {
-            if is_surface(px) {
-                let inv = 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt();
-                normal[0][i] = px[0] * inv;
-                normal[1][i] = px[1] * inv;
-                normal[2][i] = px[2] * inv;
-                surface[i] = 1.0;
-            }
-        }
+        let mut normal = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+        let mut surface = Buf::uninit(n);
+        let [n0, n1, n2] = &mut normal;
+        n0.par_chunks_mut(PAR_CHUNK)
+            .zip(n1.par_chunks_mut(PAR_CHUNK))
+            .zip(n2.par_chunks_mut(PAR_CHUNK))
+            .zip(surface.par_chunks_mut(PAR_CHUNK))
+            .zip(g.normal.data().par_chunks(3 * PAR_CHUNK))
+            .for_each(|((((a, b), c), s), src)| {
+                for (i, px) in src.chunks_exact(3).enumerate() {
+                    let ok = is_surface(px);
+                    let inv =
+                        if ok { 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt() } else { 0.0 };
+                    a[i] = px[0] * inv;
+                    b[i] = px[1] * inv;
+                    c[i] = px[2] * inv;
+                    s[i] = if ok { 1.0 } else { 0.0 };
+                }
+            });
         let depth = g.depth.as_ref().map(|d| {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let m = d
                     .data()
                     .iter()
-                    .zip(&surface)
+                    .zip(surface.iter())
                     .filter(|(v, s)| **s > 0.0 && v.is_finite())
                     .fold(0.0f32, |m, (v, _)| m.max(v.abs()));
                 if m > 0.0 {
@@ -179,17 +201,17 @@ impl Guides {
                     1.0
                 }
             });
-            d.data()
-                .iter()
-                .zip(&surface)
-                .map(|(v, s)| if *s > 0.0 && v.is_finite() { v / scale } else { 0.0 })
-                .collect::<Vec<f32>>()
+            let mut b = Buf::uninit(n);
+            b.par_iter_mut()
+                .zip(d.data().par_iter())
+                .for_each(|(o, v)| *o = if v.is_finite() { v / scale } else { 0.0 });
+            b
         });
         let position = if let Some(p) = &g.position {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let mut lo = [f32::INFINITY; 3];
                 let mut hi = [f32::NEG_INFINITY; 3];
-                for (px, s) in p.data().chunks_exact(3).zip(&surface) {
+                for (px, s) in p.data().chunks_exact(3).zip(surface.iter()) {
                     if *s > 0.0 && px.iter().all(|v| v.is_finite()) {
                         for k in 0..3 {
                             lo[k] = lo[k].min(px[k]);
@@ -205,19 +227,24 @@ impl Guides {
                     1.0
                 }
             });
-            let mut planes = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-            for (i, px) in p.data().chunks_exact(3).enumerate() {
-                // Background keeps its (finite) positions: it is only ever compared with
-                // background.
-                if px.iter().all(|v| v.is_finite()) {
-                    for k in 0..3 {
-                        planes[k][i] = px[k] / scale;
+            let mut planes = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+            let [a, b, c] = &mut planes;
+            // Background keeps its (finite) positions: it is only ever compared with background.
+            a.par_chunks_mut(PAR_CHUNK)
+                .zip(b.par_chunks_mut(PAR_CHUNK))
+                .zip(c.par_chunks_mut(PAR_CHUNK))
+                .zip(p.data().par_chunks(3 * PAR_CHUNK))
+                .for_each(|(((a, b), c), src)| {
+                    for (i, px) in src.chunks_exact(3).enumerate() {
+                        let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+                        a[i] = if ok { px[0] / scale } else { 0.0 };
+                        b[i] = if ok { px[1] / scale } else { 0.0 };
+                        c[i] = if ok { px[2] / scale } else { 0.0 };
                     }
-                }
-            }
+                });
             Some(planes)
         } else {
-            depth.as_ref().map(|d| [d.clone(), vec![0.0; n], vec![0.0; n]])
+            depth.as_ref().map(|d| [d.clone(), Buf::zeros(n), Buf::zeros(n)])
         };
         Ok(Self { width, height, normal, position, depth, surface })
     }

@@ -23,10 +23,12 @@
 //! radius 24-32, eps 0.01 for normals and 0.01-0.03 for depth). Edges that the guidance does
 //! not show (shadows, texture) are smoothed away: filter demodulated illumination.
 
-use crate::boxsum::box_sums;
+use crate::boxsum::{box_sums, BoxPass};
 use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, to_planes, GBuffer, Guides, Planes3};
+use crate::pool::Buf;
 use filtrace_core::Image;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Which guidance image `I` the linear model uses (Bauszat's Table 2: 1, 3, 4 dimensions).
@@ -110,18 +112,21 @@ impl Default for GuidedParams {
 
 /// The guidance planes, centred (`I - 0.5`, which leaves `a` unchanged and keeps the running
 /// sums small), and the `eps` of each.
-pub(crate) fn guidance_planes(
-    g: &Guides,
-    p: &GuidedParams,
-) -> Result<(Vec<Vec<f32>>, Vec<f32>), DenoiseError> {
+pub(crate) fn guidance_planes(g: &Guides, p: &GuidedParams) -> Result<(Vec<Buf>, Vec<f32>), DenoiseError> {
     let n = &g.normal;
+    let map = |src: &[f32], f: &(dyn Fn(f32) -> f32 + Sync)| {
+        let mut b = Buf::uninit(src.len());
+        b.par_iter_mut().zip(src.par_iter()).for_each(|(o, v)| *o = f(*v));
+        b
+    };
     Ok(match p.guidance {
         Guidance::GreyNormal => {
-            let grey = (0..g.width * g.height).map(|i| (n[0][i] + n[1][i] + n[2][i]) / 6.0).collect();
+            let mut grey = Buf::uninit(g.width * g.height);
+            grey.par_iter_mut().enumerate().for_each(|(i, o)| *o = (n[0][i] + n[1][i] + n[2][i]) / 6.0);
             (vec![grey], vec![p.eps_normal])
         }
         Guidance::Normal => {
-            let planes = (0..3).map(|c| n[c].iter().map(|v| 0.5 * v).collect()).collect();
+            let planes = (0..3).map(|c| map(&n[c], &|v| 0.5 * v)).collect();
             (planes, vec![p.eps_normal; 3])
         }
         Guidance::NormalDepth => {
@@ -129,8 +134,8 @@ pub(crate) fn guidance_planes(
                 buffer: "depth",
                 needed_by: "guided filter with normal+depth guidance",
             })?;
-            let mut planes: Vec<Vec<f32>> = (0..3).map(|c| n[c].iter().map(|v| 0.5 * v).collect()).collect();
-            planes.push(d.iter().map(|v| v - 0.5).collect());
+            let mut planes: Vec<Buf> = (0..3).map(|c| map(&n[c], &|v| 0.5 * v)).collect();
+            planes.push(map(d, &|v| v - 0.5));
             (planes, vec![p.eps_normal, p.eps_normal, p.eps_normal, p.eps_depth])
         }
     })
@@ -155,7 +160,8 @@ pub fn guided_into(
     let g = Guides::new(guide, color.width(), color.height())?;
     let (planes, eps) = guidance_planes(&g, params)?;
     let (p, valid) = to_planes(color);
-    let mask: Vec<f32> = g.surface.iter().zip(&valid).map(|(s, v)| s * v).collect();
+    let mut mask = Buf::uninit(g.width * g.height);
+    mask.par_iter_mut().zip(g.surface.par_iter().zip(valid.par_iter())).for_each(|(m, (s, v))| *m = s * v);
     if out.width() != color.width() || out.height() != color.height() || out.channels() != 3 {
         *out = Image::new(color.width(), color.height(), 3);
     }
@@ -198,7 +204,7 @@ const fn k1_used(d: usize) -> usize {
 /// `[indicator, a (3D), b (3)]`).
 fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     args: &Args,
-    guide: &[&Vec<f32>; D],
+    guide: &[&[f32]; D],
     eps: [f32; D],
     out: &mut Image,
 ) {
@@ -208,88 +214,109 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     let kc = kp + 3; // index of m I p
 
     // Pass 1: window statistics -> per-window coefficients (a_k, b_k) (eqs. 8-9).
-    let mut coef = vec![0.0f32; w * h * K2];
-    box_sums::<K1, _, _>(
-        w,
-        h,
-        r,
-        &mut coef,
-        K2,
-        |y, row| {
-            let o = y * w;
-            for (x, q) in row.iter_mut().enumerate() {
-                let m = args.mask[o + x];
-                let mut i = [0.0f32; D];
-                for a in 0..D {
-                    i[a] = guide[a][o + x];
-                }
-                let p = [args.p[0][o + x], args.p[1][o + x], args.p[2][o + x]];
-                q[0] = m;
-                let mut k = 1;
-                for a in 0..D {
-                    q[k] = m * i[a];
-                    k += 1;
-                }
-                for a in 0..D {
-                    for b in a..D {
-                        q[k] = m * i[a] * i[b];
-                        k += 1;
-                    }
-                }
-                for c in 0..3 {
-                    q[kp + c] = m * p[c];
-                }
-                for a in 0..D {
-                    for c in 0..3 {
-                        q[kc + a * 3 + c] = m * i[a] * p[c];
-                    }
-                }
-            }
-        },
-        |_, sums, out_row| {
-            for (s, o) in sums.iter().zip(out_row.chunks_exact_mut(K2)) {
-                solve_window::<D, K1>(s, &eps, kp, kc, o);
-            }
-        },
-    );
-
+    let mut coef = crate::pool::take(w * h * K2);
+    let pass1 = Pass1::<D> { args, guide, eps, kp, kc };
+    box_sums::<K1, _>(w, h, r, &mut coef, K2, &pass1);
     // Pass 2: average the coefficients over the windows covering each pixel and apply them.
-    let data = out.data_mut();
-    box_sums::<K2, _, _>(
-        w,
-        h,
-        r,
-        data,
-        3,
-        |y, row| {
-            let src = &coef[y * w * K2..(y + 1) * w * K2];
-            for (q, s) in row.iter_mut().zip(src.chunks_exact(K2)) {
-                q.copy_from_slice(s);
+    let pass2 = Pass2::<D, K2> { args, guide, coef: &coef };
+    box_sums::<K2, _>(w, h, r, out.data_mut(), 3, &pass2);
+    crate::pool::give(coef);
+}
+
+struct Pass1<'a, const D: usize> {
+    args: &'a Args<'a>,
+    guide: &'a [&'a [f32]; D],
+    eps: [f32; D],
+    kp: usize,
+    kc: usize,
+}
+
+impl<const D: usize, const K1: usize> BoxPass<K1> for Pass1<'_, D> {
+    /// `m, m I, m I I^T, m p, m I p` of a pixel.
+    #[inline(always)]
+    fn quantities(&self, x: usize, y: usize) -> [f32; K1] {
+        let (args, kp, kc) = (self.args, self.kp, self.kc);
+        let j = y * args.w + x;
+        let m = args.mask[j];
+        let mut i = [0.0f32; D];
+        for a in 0..D {
+            i[a] = m * self.guide[a][j];
+        }
+        let p = [args.p[0][j], args.p[1][j], args.p[2][j]];
+        let mut q = [0.0f32; K1];
+        q[0] = m;
+        let mut k = 1;
+        for a in 0..D {
+            q[k] = i[a];
+            k += 1;
+        }
+        // m I_a I_b = (m I_a) I_b / m... m is 0 or 1, so (m I_a)(m I_b) is the same.
+        for a in 0..D {
+            for b in a..D {
+                q[k] = i[a] * i[b];
+                k += 1;
             }
-        },
-        |y, sums, out_row| {
-            let o = y * w;
-            for (x, (s, px)) in sums.iter().zip(out_row.chunks_exact_mut(3)).enumerate() {
-                let i = o + x;
-                let n = s[0];
-                if args.surface[i] > 0.0 && n > 0.5 {
-                    let inv = 1.0 / n;
-                    for c in 0..3 {
-                        let mut q = s[1 + 3 * D + c];
-                        for a in 0..D {
-                            q += s[1 + a * 3 + c] * guide[a][i];
-                        }
-                        px[c] = q * inv;
+        }
+        for c in 0..3 {
+            q[kp + c] = m * p[c];
+        }
+        for a in 0..D {
+            for c in 0..3 {
+                q[kc + a * 3 + c] = i[a] * p[c];
+            }
+        }
+        q
+    }
+
+    #[inline(always)]
+    fn consume(&self, _x0: usize, _y: usize, sums: &[[f32; K1]], out: &mut [f32]) {
+        let k2 = out.len() / sums.len();
+        for (s, o) in sums.iter().zip(out.chunks_exact_mut(k2)) {
+            solve_window::<D, K1>(s, &self.eps, self.kp, self.kc, o);
+        }
+    }
+}
+
+struct Pass2<'a, const D: usize, const K2: usize> {
+    args: &'a Args<'a>,
+    guide: &'a [&'a [f32]; D],
+    coef: &'a [f32],
+}
+
+impl<const D: usize, const K2: usize> BoxPass<K2> for Pass2<'_, D, K2> {
+    #[inline(always)]
+    fn quantities(&self, x: usize, y: usize) -> [f32; K2] {
+        let j = (y * self.args.w + x) * K2;
+        let mut q = [0.0f32; K2];
+        q.copy_from_slice(&self.coef[j..j + K2]);
+        q
+    }
+
+    /// `q_i = mean(a) . I_i + mean(b)` over the windows that hold fit pixels.
+    #[inline(always)]
+    fn consume(&self, x0: usize, y: usize, sums: &[[f32; K2]], out: &mut [f32]) {
+        let (args, guide) = (self.args, self.guide);
+        let o = y * args.w + x0;
+        for (x, (s, px)) in sums.iter().zip(out.chunks_exact_mut(3)).enumerate() {
+            let i = o + x;
+            let n = s[0];
+            if args.surface[i] > 0.0 && n > 0.5 {
+                let inv = 1.0 / n;
+                for c in 0..3 {
+                    let mut q = s[1 + 3 * D + c];
+                    for a in 0..D {
+                        q += s[1 + a * 3 + c] * guide[a][i];
                     }
-                } else {
-                    // Background (or an isolated invalid pixel): pass the sanitised input through.
-                    for c in 0..3 {
-                        px[c] = args.p[c][i];
-                    }
+                    px[c] = q * inv;
+                }
+            } else {
+                // Background (or an isolated invalid pixel): pass the sanitised input through.
+                for c in 0..3 {
+                    px[c] = args.p[c][i];
                 }
             }
-        },
-    );
+        }
+    }
 }
 
 /// From the window sums `s`, the ridge-regression coefficients of one window, written as

@@ -40,6 +40,7 @@ pub mod error;
 pub mod gbuffer;
 pub mod guided;
 mod kernel;
+mod pool;
 pub mod simd;
 
 #[cfg(test)]

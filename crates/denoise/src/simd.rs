@@ -27,6 +27,33 @@ pub fn exp_neg(x: f32) -> f32 {
     p * scale
 }
 
+/// The instruction set the hot loops run with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    /// 16 lanes (AVX-512F with AVX2 and FMA).
+    Avx512,
+    /// 8 lanes (AVX2 and FMA).
+    Avx2,
+    /// The baseline build (SSE2 on x86-64).
+    Base,
+}
+
+/// The widest instruction set of the hot loops this CPU runs.
+#[inline]
+pub fn isa() -> Isa {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx512f") && has_avx2() {
+            return Isa::Avx512;
+        }
+    }
+    if has_avx2() {
+        Isa::Avx2
+    } else {
+        Isa::Base
+    }
+}
+
 /// True when the AVX2 build of the hot loops may run on this CPU.
 #[inline]
 pub fn has_avx2() -> bool {

@@ -136,8 +136,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
     let build_s = pipeline.source().renderer().build_seconds();
-    let frame =
-        pool.install(|| pipeline.render_frame().map(|f| f.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let frame = pool.install(|| pipeline.render_frame().cloned()).map_err(|e| anyhow::anyhow!("{e}"))?;
     let out = common.output_path();
     write_frame(&out, &frame, &common.tonemap())?;
     let m = frame.images.color.mean();

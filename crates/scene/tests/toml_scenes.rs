@@ -38,7 +38,13 @@ fn every_example_scene_loads() {
         assert!(s.stats.warnings.is_empty(), "{}: {:?}", p.display(), s.stats.warnings);
         let b = s.bounds();
         assert!(b.min.is_finite() && b.max.is_finite(), "{}", p.display());
-        println!("{}: {} triangles, {} instances", p.display(), s.triangle_count(), s.instances.len());
+        println!(
+            "{}: {} triangles, {} instances, bounds {:?}",
+            p.display(),
+            s.triangle_count(),
+            s.instances.len(),
+            b
+        );
     }
 }
 

@@ -103,19 +103,17 @@ struct Summary<'a> {
     build_s: f64,
     timings: filtrace_pipeline::FrameTimings,
     lookup_failures: u64,
+    /// Adaptive sampling: milliseconds of the G-buffer pass + importance map + apportionment.
+    adaptive_plan_ms: Option<f64>,
     mean_rgb: [f64; 3],
     output: &'a Path,
 }
 
 /// The filtered branch of `filtrace render`.
 pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) -> anyhow::Result<()> {
-    if adaptive.adaptive {
-        anyhow::bail!(
-            "--adaptive is not wired into `filtrace render` yet: the filtered pipeline takes \
-             per-pixel indirect counts (FilteredRenderer::render_frame_with_counts), but no \
-             importance map drives them here; render without --adaptive"
-        );
-    }
+    // `--adaptive` alone: the pipeline unfiltered, with adaptive indirect sample counts.
+    let filter =
+        &FilterArgs { filter: filter.filter.clone().or_else(|| Some("none".into())), ..filter.clone() };
     let settings = PipelineSettings {
         width: common.res.width,
         height: common.res.height,
@@ -136,9 +134,42 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
     let build_s = pipeline.source().renderer().build_seconds();
-    let frame = pool.install(|| pipeline.render_frame().cloned()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    // Adaptive sampling (Bauszat et al. 2011b): a G-buffer pass (guide rays without indirect
+    // paths), the importance map from its normals and positions, the apportioned per-pixel
+    // indirect path counts, then the frame with those counts.
+    let mut plan_ms = None;
+    let mut adaptive_layers = None;
+    let counts = match adaptive.params() {
+        None => None,
+        Some(params) => {
+            let t = Instant::now();
+            let zero = vec![0u32; settings.width as usize * settings.height as usize];
+            let planned = pool.install(|| -> anyhow::Result<_> {
+                let g = &pipeline
+                    .render_frame_with_counts(Some(&zero))
+                    .map_err(|e| anyhow::anyhow!("{e}"))?
+                    .images
+                    .guide;
+                filtrace_adaptive::plan_frame(&g.normal, &g.position, &params)
+                    .map_err(|e| anyhow::anyhow!("{e}"))
+            })?;
+            plan_ms = Some(t.elapsed().as_secs_f64() * 1e3);
+            let (importance, counts) = planned;
+            adaptive_layers = Some((importance, counts.to_image()));
+            Some(counts.counts().to_vec())
+        }
+    };
+    let frame = pool
+        .install(|| pipeline.render_frame_with_counts(counts.as_deref()).cloned())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let out = common.output_path();
-    write_frame(&out, &frame, &common.tonemap())?;
+    let extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
+        Some((importance, counts)) => {
+            vec![("importance", &["Y"], importance), ("indirect_paths", &["Y"], counts)]
+        }
+        None => vec![],
+    };
+    write_frame(&out, &frame, &extra, &common.tonemap())?;
     let m = frame.images.color.mean();
     let summary = Summary {
         scene: &common.scene,
@@ -154,6 +185,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         build_s,
         timings: frame.timings,
         lookup_failures: frame.lookup_failures,
+        adaptive_plan_ms: plan_ms,
         mean_rgb: [m[0], m[1], m[2]],
         output: &out,
     };
@@ -161,13 +193,19 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         println!("{}", serde_json::to_string(&summary)?);
     } else {
         let t = &frame.timings;
+        let paths = match adaptive.params() {
+            Some(p) => format!(
+                "adaptive indirect paths, {} per pixel on average, at least {}",
+                p.budget_spp, p.min_spp
+            ),
+            None => format!("{} indirect path(s) per guide ray", summary.indirect_paths),
+        };
         println!(
-            "{}: {}x{} at {} spp ({} indirect path(s) per guide ray), max depth {}, filter {}, {} threads",
+            "{}: {}x{} at {} spp ({paths}), max depth {}, filter {}, {} threads",
             summary.scene,
             summary.width,
             summary.height,
             summary.spp,
-            summary.indirect_paths,
             summary.max_depth,
             summary.filter,
             threads
@@ -185,6 +223,9 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
             "  load {load_s:.3} s, build {build_s:.3} s; mean linear RGB {:.6} {:.6} {:.6}",
             m[0], m[1], m[2]
         );
+        if let Some(p) = plan_ms {
+            println!("  adaptive sampling: plan (G-buffer pass, importance, apportionment) {p:.1} ms");
+        }
         if frame.lookup_failures > 0 {
             println!(
                 "  {} further samples found no guide ray that hit (no indirect light)",
@@ -198,11 +239,12 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
 
 /// One EXR with every layer of the frame (`R,G,B` final, `noisy`, `direct`, `indirect`,
 /// `filtered` = filtered indirect, `indirect_map`/`filtered_map` = the guide rays' map
-/// before/after the filter, guide `albedo`, `normal`, `position`, `depth`) and the PNG of
-/// the final image beside it.
+/// before/after the filter, guide `albedo`, `normal`, `position`, `depth`, then `extra`)
+/// and the PNG of the final image beside it.
 pub fn write_frame(
     exr_path: &Path,
     frame: &Frame,
+    extra: &[(&str, &[&str], &filtrace_core::Image)],
     tonemap: &filtrace_io::TonemapParams,
 ) -> anyhow::Result<()> {
     if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -228,6 +270,7 @@ pub fn write_frame(
     if im.filtered_direct.pixel_count() > 0 {
         layers.push(("filtered_direct", RGB, &im.filtered_direct));
     }
+    layers.extend_from_slice(extra);
     for (name, channels, image) in layers {
         exr.insert(name, channels, image)?;
     }
@@ -270,5 +313,53 @@ impl AdaptiveArgs {
             min_spp: self.min_spp,
             mode: if self.paper_rounding { Mode::Paper } else { Mode::Exact },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: super::super::render::Args,
+    }
+
+    fn render(extra: &[&str]) -> filtrace_io::ExrImage {
+        let dir = std::env::temp_dir().join(format!("filtrace-rf-{}-{}", std::process::id(), extra.len()));
+        let out = dir.join("f.exr");
+        let mut argv = vec!["t", "cornell", "--res", "16x12", "--max-depth", "3", "--json"];
+        let out_s = out.to_string_lossy().into_owned();
+        argv.extend_from_slice(&["--out", &out_s]);
+        argv.extend_from_slice(extra);
+        let a = Cli::try_parse_from(argv).unwrap().args;
+        super::run(&a.common, &a.filter, &a.adaptive).unwrap();
+        let exr = filtrace_io::read_exr(&out).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        exr
+    }
+
+    #[test]
+    fn filtered_render_writes_every_layer_and_colour_is_direct_plus_filtered_indirect() {
+        let exr = render(&["--filter", "guided", "--filter-radius", "3", "--spp", "2"]);
+        let layer = |n: &str| exr.layer(&[n]).unwrap_or_else(|| panic!("layer {n} missing"));
+        let (color, direct, filtered) = (layer("color"), layer("direct"), layer("filtered"));
+        for n in ["noisy", "indirect", "indirect_map", "filtered_map", "albedo", "normal", "depth"] {
+            assert_eq!(layer(n).width(), 16, "{n}");
+        }
+        for i in 0..color.data().len() {
+            let want = direct.data()[i] + filtered.data()[i];
+            assert!((color.data()[i] - want).abs() <= 1e-5 * (1.0 + want.abs()));
+        }
+    }
+
+    #[test]
+    fn adaptive_render_adds_importance_and_path_count_layers() {
+        let exr = render(&["--adaptive", "--budget-spp", "2"]);
+        let counts = exr.layer(&["indirect_paths"]).expect("indirect_paths layer");
+        let total: f32 = counts.data().iter().sum();
+        assert_eq!(total, 2.0 * 16.0 * 12.0, "the budget is spent exactly");
+        assert!(exr.layer(&["importance"]).is_some());
     }
 }

@@ -9,15 +9,21 @@
 //! reaches an instance is moved into object space by the instance's inverse affine
 //! transform; the direction is *not* renormalised, so `t` keeps its meaning and the BLAS
 //! hit distance is directly the world hit distance. Moving objects only need
-//! [`SceneAccel::update_transforms`], which rebuilds the (small) top level. A scene with a
-//! single instance skips the top level altogether.
+//! [`SceneAccel::update_transforms`], which rebuilds the (small) top level. Instances with
+//! the identity transform (loaders emit one per object: the Cornell box has eight) are
+//! merged into a single bottom level, and a scene with one object skips the top level
+//! altogether, so small scenes pay no two-level overhead.
 //!
 //! Both levels are built by the same binary **binned SAH** builder ([`sah`]; MacDonald &
-//! Booth 1990, Wald 2007), then collapsed into a **4-wide BVH** whose nodes are tested
-//! with one SSE slab test per node ([`wide`]; Dammertz et al. 2008, Ize 2013). Triangles
-//! are copied into leaf order, and tested with the **watertight** algorithm of Woop,
-//! Benthin and Wald (JCGT 2013, [`triangle`]), so rays through shared edges and vertices
-//! of closed meshes never slip through.
+//! Booth 1990, Wald 2007; leaf costs count 4-triangle blocks as Embree's do), then
+//! collapsed into a **4-wide BVH** (Dammertz et al. 2008) whose four child boxes are
+//! tested with one SSE slab test (Williams et al. 2005, robust per Ize 2013). Traversal is
+//! near-first for closest hits, unordered for any hits, and prefetches the children it
+//! will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
+//! at a time with the **watertight** algorithm of Woop, Benthin and Wald (JCGT 2013,
+//! [`triangle`]), so rays through shared edges and vertices of closed meshes never slip
+//! through. Measurements against Embree 4: `docs/perf-accel.md` (parity on the 270k
+//! stand-in mesh for incoherent closest hits, 0.84-0.97 on the bunny and the engine).
 //!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
 //! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and

@@ -306,3 +306,25 @@ fn merged_identity_instances_match_brute_force_and_survive_moves() {
     assert_eq!(h.instance, 5);
     assert!((h.t - 6.0).abs() < 1e-4, "{h:?}");
 }
+
+/// The instanced glTF engine (34 meshes, transformed instances) against brute force.
+#[test]
+#[ignore = "slow: brute force over 121k triangles"]
+fn gltf_engine_matches_brute_force() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/gltf/2CylinderEngine.glb");
+    if !path.exists() {
+        println!("SKIPPED: {} not found", path.display());
+        return;
+    }
+    let scene = filtrace_scene::load(&path).expect("engine loads");
+    let accel = SceneAccel::build(&scene);
+    let brute = BruteForce::build(&scene);
+    let mut hits = 0;
+    let rays = random_rays(&scene, 1500, 12);
+    for ray in &rays {
+        check_ray(&accel, &brute, ray).unwrap();
+        hits += accel.intersect(ray).is_some() as usize;
+    }
+    assert!(hits > 150 && hits < 1350, "{hits}");
+}

@@ -191,8 +191,15 @@ impl ObjParser<'_> {
                 if rest.is_empty() {
                     return Err(self.err(n, "mtllib without a file name"));
                 }
-                let mtl_path = self.base.join(rest);
-                self.load_mtl(&mtl_path)?;
+                // Several libraries may follow `mtllib`; a single name may contain spaces.
+                let whole = self.base.join(rest);
+                if whole.is_file() || !rest.contains(char::is_whitespace) {
+                    self.load_mtl(&whole)?;
+                } else {
+                    for name in rest.split_whitespace() {
+                        self.load_mtl(&self.base.join(name))?;
+                    }
+                }
             }
             "s" | "l" | "p" | "vp" | "cstype" | "deg" | "bmat" | "step" | "curv" | "curv2" | "surf"
             | "parm" | "trim" | "hole" | "scrv" | "sp" | "end" | "mg" | "lod" | "shadow_obj"

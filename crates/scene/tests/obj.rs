@@ -215,3 +215,14 @@ fn missing_obj_is_an_io_error() {
     let e = load(std::path::Path::new("/definitely/not/here.obj")).unwrap_err();
     assert!(matches!(e, SceneError::Io { .. }), "{e:?}");
 }
+
+#[test]
+fn mtllib_with_several_libraries() {
+    let obj = "mtllib a.mtl b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl fromb\nf 1 2 3\n";
+    let a = b"newmtl froma\nKd 1 0 0\n";
+    let b = b"newmtl fromb\nKd 0 1 0\n";
+    let s = load_text("multi-mtl", obj, &[("a.mtl", a), ("b.mtl", b)]).unwrap();
+    assert!(s.stats.warnings.is_empty(), "{:?}", s.stats.warnings);
+    assert_eq!(s.materials.len(), 2);
+    assert_eq!(s.materials[s.meshes[0].material_ids[0] as usize].name, "fromb");
+}

@@ -255,3 +255,20 @@ fn missing_camera_is_none_and_default_camera_frames_the_bounds() {
     // Outside the box.
     assert!(!(c.eye.cmpge(b.min).all() && c.eye.cmple(b.max).all()));
 }
+
+#[test]
+fn transforms_apply_scale_then_rotate_then_translate() {
+    let toml = "[[objects]]\nshape = \"cube\"\n\
+                transform = { scale = [2, 1, 1], rotate = { deg = 90, axis = [0, 0, 1] }, translate = [0, 0, 5] }\n\
+                [[objects]]\nshape = \"cube\"\n\
+                transform = { matrix = [[0, -1, 0, 0], [2, 0, 0, 0], [0, 0, 1, 5], [0, 0, 0, 1]] }\n";
+    let dir = temp_files("toml-trs", &[("t.toml", toml.as_bytes())]);
+    let s = load(&dir.join("t.toml")).unwrap();
+    // (1, 0, 0) -> scale (2, 0, 0) -> 90 degrees about z (0, 2, 0) -> translate (0, 2, 5).
+    for i in &s.instances {
+        let p = i.transform.transform_point3(Vec3::X);
+        assert!((p - Vec3::new(0.0, 2.0, 5.0)).length() < 1e-5, "{p}");
+        let q = i.transform.transform_point3(Vec3::Y);
+        assert!((q - Vec3::new(-1.0, 0.0, 5.0)).length() < 1e-5, "{q}");
+    }
+}

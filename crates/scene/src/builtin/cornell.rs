@@ -4,6 +4,11 @@
 //! only, and the colours and radiance of Mitsuba 3.9.1's built-in Cornell box — identical to
 //! `../shared/scenes/cornell_box/cornell_box_lit.obj` + `.mtl` (a test checks this).
 //! The front wall stays removed; the camera is the classic one ([`Camera::cornell`]).
+//!
+//! Licence of the geometry data below: Copyright 2009-2018 Intel Corporation (embree),
+//! Licensed under the Apache License, Version 2.0 (http://www.apache.org/licenses/LICENSE-2.0);
+//! distributed on an "AS IS" BASIS, WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND. Changes: the
+//! light quad enabled at y = 548.7, colours from Mitsuba 3.9.1, data written as Rust constants.
 
 use filtrace_core::{Rgb, Vec3};
 

@@ -156,9 +156,12 @@ pub fn atrous_into(
     let (mut src, valid) = to_planes(color);
     let n = color.pixel_count();
     let mut dst: Planes3 = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
+    // Invalid (non-finite) colours are absent at every level: their pixels get values from
+    // valid neighbours but never pass them on (a block of invalid pixels would otherwise
+    // spread its placeholder values at the coarser levels).
+    let any_invalid = valid.contains(&0.0);
     for i in 0..params.iterations {
-        // Level 0 reads invalid (non-finite) colours as absent; every later level is valid.
-        let v = if i == 0 { Some(&valid[..]) } else { None };
+        let v = if any_invalid { Some(&valid[..]) } else { None };
         atrous_step(&src, v, &g, params, i, &mut dst);
         std::mem::swap(&mut src, &mut dst);
     }

@@ -234,7 +234,8 @@ pub(crate) fn edge_avoiding_pass(
                 let p = y * w;
                 for l in 0..tw {
                     let x = t0 + l;
-                    if sw[l] > 0.0 {
+                    // (Weights below 1e-30 count as none: their reciprocal would overflow.)
+                    if sw[l] > 1e-30 {
                         let inv_w = 1.0 / sw[l];
                         o0[x] = s0[l] * inv_w;
                         o1[x] = s1[l] * inv_w;

@@ -102,13 +102,37 @@ impl Filter {
 
     /// Filters the illumination `color / max(albedo, eps)` and multiplies the albedo back
     /// (Dammertz et al. 2010, deferred shading). Needs `guide.albedo`.
+    ///
+    /// Pixels whose albedo is below `eps` in every channel (black surfaces, emitters written
+    /// with a black albedo) carry no usable illumination: they are left out of the filter
+    /// (like non-finite values: never spread) and keep their input colour. Without this an
+    /// emitter's `L / eps` would flood the geometry-only filters' neighbourhood.
     pub fn apply_demodulated(&self, color: &Image, guide: &GBuffer, eps: f32) -> Result<Image, DenoiseError> {
         let albedo = guide
             .albedo
             .as_ref()
             .ok_or(DenoiseError::MissingGuide { buffer: "albedo", needed_by: "demodulation" })?;
-        let illum = demodulate(color, albedo, eps)?;
+        let mut illum = demodulate(color, albedo, eps)?;
+        let black = |a: &[f32]| !a.iter().any(|v| v.is_finite() && *v >= eps);
+        for (px, a) in illum.data_mut().chunks_exact_mut(3).zip(albedo.data().chunks_exact(3)) {
+            if black(a) {
+                px.fill(f32::NAN);
+            }
+        }
         let filtered = self.apply(&illum, guide)?;
-        remodulate(&filtered, albedo, eps)
+        let mut out = remodulate(&filtered, albedo, eps)?;
+        for ((o, c), a) in out
+            .data_mut()
+            .chunks_exact_mut(3)
+            .zip(color.data().chunks_exact(3))
+            .zip(albedo.data().chunks_exact(3))
+        {
+            if black(a) {
+                for (o, c) in o.iter_mut().zip(c) {
+                    *o = if c.is_finite() { *c } else { 0.0 };
+                }
+            }
+        }
+        Ok(out)
     }
 }

@@ -1,8 +1,309 @@
-//! `filtrace denoise`.
+//! `filtrace denoise IN.exr --filter atrous|guided|bilateral --out OUT.exr`: filters the
+//! colour (or indirect) layer of an EXR with one of `filtrace-denoise`'s filters, guided by
+//! the G-buffer layers of the same file (normal, position, depth, albedo) or of separate
+//! files (`--normal N.exr`, ...). Layer names of other renderers (Blender, Mitsuba 3) are
+//! understood through `filtrace_io::aliases`.
+//!
+//! With an albedo layer the illumination `colour / albedo` is filtered and re-modulated
+//! (Dammertz et al. 2010, deferred shading) unless `--no-demodulate`. With
+//! `--layer indirect`, the output colour is `direct + filtered indirect` when the file has a
+//! direct layer. Non-finite input values are reported and never spread (see
+//! `filtrace_denoise::gbuffer`). Guides a filter's preset wants but the file lacks are
+//! dropped with a warning (e.g. Mitsuba's AOVs have no position: the position weight is
+//! switched off; without depth the guided filter uses normal-only guidance).
+
+use anyhow::{bail, Context};
+use filtrace_core::Image;
+use filtrace_denoise::{AtrousParams, BilateralParams, Filter, GBuffer, Guidance, GuidedParams};
+use filtrace_io::{read_exr, write_exr, ExrImage};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FilterKind {
+    Atrous,
+    Guided,
+    Bilateral,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layer {
+    /// The full colour (`R,G,B`).
+    #[value(alias = "color")]
+    Colour,
+    /// The indirect illumination (`indirect.R/G/B`).
+    Indirect,
+}
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Input EXR (as written by `filtrace render`, or AOVs of another renderer).
+    pub input: PathBuf,
+    /// Output EXR.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long, value_enum, default_value = "atrous")]
+    pub filter: FilterKind,
+    /// Layer to filter.
+    #[arg(long, value_enum, default_value = "colour")]
+    pub layer: Layer,
+    /// À-Trous iterations (1-10; paper: 5).
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Window radius of the guided (paper: 24) or cross-bilateral (16) filter.
+    #[arg(long)]
+    pub radius: Option<u32>,
+    /// Guided filter: eps of the normal channels (paper: 0.01).
+    #[arg(long)]
+    pub eps_normal: Option<f32>,
+    /// Guided filter: eps of the depth channel (paper: 0.01-0.03).
+    #[arg(long)]
+    pub eps_depth: Option<f32>,
+    /// Guided filter guidance channels: 1 (grey normal), 3 (normal), 4 (normal + depth).
+    #[arg(long)]
+    pub guidance: Option<u32>,
+    /// Edge-stopping sigma of the colour term (`off` switches it off).
+    #[arg(long)]
+    pub sigma_color: Option<String>,
+    /// Edge-stopping sigma of the normal term (`off` switches it off).
+    #[arg(long)]
+    pub sigma_normal: Option<String>,
+    /// Edge-stopping sigma of the position term, in scene-scale units (`off` switches it off).
+    #[arg(long)]
+    pub sigma_position: Option<String>,
+    /// Length positions and depth are divided by (default: estimated from the image).
+    #[arg(long)]
+    pub scene_scale: Option<f32>,
+    /// Filter the colour itself, not colour / albedo.
+    #[arg(long)]
+    pub no_demodulate: bool,
+    /// Albedos below this are clamped when demodulating.
+    #[arg(long, default_value_t = filtrace_denoise::DEFAULT_ALBEDO_EPS)]
+    pub albedo_eps: f32,
+    /// Read the normal from this EXR instead of IN.
+    #[arg(long)]
+    pub normal: Option<PathBuf>,
+    /// Read the albedo from this EXR instead of IN.
+    #[arg(long)]
+    pub albedo: Option<PathBuf>,
+    /// Read the position from this EXR instead of IN.
+    #[arg(long)]
+    pub position: Option<PathBuf>,
+    /// Read the depth from this EXR instead of IN.
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`filtrace denoise` is not implemented yet")
+/// `off` → `None`, a positive number → `Some`.
+fn parse_sigma(name: &str, s: &Option<String>, default: Option<f32>) -> anyhow::Result<Option<f32>> {
+    match s.as_deref() {
+        None => Ok(default),
+        Some("off" | "none") => Ok(None),
+        Some(v) => {
+            let x: f32 =
+                v.parse().with_context(|| format!("--{name}: expected a number or `off`, got {v:?}"))?;
+            if !(x.is_finite() && x > 0.0) {
+                bail!("--{name} must be > 0 (or `off`), got {v}");
+            }
+            Ok(Some(x))
+        }
+    }
+}
+
+/// A guide layer from its own file (the named layer, else the file's colour) or from IN.
+fn guide_layer(
+    input: &ExrImage,
+    own_file: &Option<PathBuf>,
+    names: &[&str],
+    what: &str,
+) -> anyhow::Result<Option<Image>> {
+    match own_file {
+        Some(path) => {
+            let exr = read_exr(path).with_context(|| format!("reading the {what} file"))?;
+            let mut all: Vec<&str> = names.to_vec();
+            all.push("color");
+            Ok(Some(exr.require_layer(&all).with_context(|| format!("{}: no {what} layer", path.display()))?))
+        }
+        None => Ok(input.layer(names)),
+    }
+}
+
+fn check_size(im: &Image, w: usize, h: usize, what: &str, path: &Path) -> anyhow::Result<()> {
+    if im.width() != w || im.height() != h {
+        bail!("{what} is {}x{} but {} is {w}x{h}: sizes must match", im.width(), im.height(), path.display());
+    }
+    Ok(())
+}
+
+fn report_non_finite(im: &Image, what: &str) {
+    let n = im.count_non_finite();
+    if n > 0 {
+        eprintln!(
+            "warning: {n} non-finite values in the {what} layer: treated as missing (never spread; \
+             colour pixels are rebuilt from valid neighbours)"
+        );
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let input = read_exr(&args.input).with_context(|| format!("reading {}", args.input.display()))?;
+    for w in input.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let (w, h) = (input.width(), input.height());
+    let layer_names: &[&str] = match args.layer {
+        Layer::Colour => &["color"],
+        Layer::Indirect => &["indirect"],
+    };
+    let noisy = input.require_layer(layer_names)?;
+    if noisy.channels() != 3 {
+        bail!("the {:?} layer has {} channels, expected 3", args.layer, noisy.channels());
+    }
+    report_non_finite(&noisy, "input colour");
+
+    // G-buffer.
+    let normal = guide_layer(&input, &args.normal, &["normal"], "normal")?.with_context(|| {
+        format!(
+            "{} has no normal layer (looked for normal, Normal, Denoising Normal, nn, ...; channels: {}); \
+             give one with --normal FILE",
+            args.input.display(),
+            input.channel_names().join(", ")
+        )
+    })?;
+    let position = guide_layer(&input, &args.position, &["position"], "position")?;
+    let depth = guide_layer(&input, &args.depth, &["depth"], "depth")?;
+    let albedo = guide_layer(&input, &args.albedo, &["albedo"], "albedo")?;
+    let mut guide = GBuffer::new(normal);
+    check_size(&guide.normal, w, h, "the normal layer", &args.input)?;
+    report_non_finite(&guide.normal, "normal");
+    if let Some(p) = position {
+        check_size(&p, w, h, "the position layer", &args.input)?;
+        report_non_finite(&p, "position");
+        guide = guide.with_position(p);
+    }
+    if let Some(d) = depth {
+        let d = if d.channels() == 1 { d } else { d.channels_range(0..1) };
+        check_size(&d, w, h, "the depth layer", &args.input)?;
+        report_non_finite(&d, "depth");
+        guide = guide.with_depth(d);
+    }
+    if let Some(a) = albedo {
+        check_size(&a, w, h, "the albedo layer", &args.input)?;
+        report_non_finite(&a, "albedo");
+        guide = guide.with_albedo(a);
+    }
+    guide.scene_scale = args.scene_scale;
+    let has_pos = guide.position.is_some() || guide.depth.is_some();
+
+    // Filter parameters: the paper preset, then the overrides.
+    let only = |opt: bool, flag: &str, filters: &str| -> anyhow::Result<()> {
+        if opt {
+            bail!("{flag} applies to the {filters} filter only");
+        }
+        Ok(())
+    };
+    let filter = match args.filter {
+        FilterKind::Atrous => {
+            only(args.radius.is_some(), "--radius", "guided and bilateral")?;
+            only(
+                args.eps_normal.is_some() || args.eps_depth.is_some() || args.guidance.is_some(),
+                "--eps-*/--guidance",
+                "guided",
+            )?;
+            let d = AtrousParams::paper();
+            let mut p = AtrousParams {
+                iterations: args.iterations.unwrap_or(d.iterations),
+                sigma_color: parse_sigma("sigma-color", &args.sigma_color, d.sigma_color)?,
+                sigma_normal: parse_sigma("sigma-normal", &args.sigma_normal, d.sigma_normal)?,
+                sigma_position: parse_sigma("sigma-position", &args.sigma_position, d.sigma_position)?,
+            };
+            if p.sigma_position.is_some() && !has_pos {
+                eprintln!("warning: no position or depth layer: the position weight is switched off");
+                p.sigma_position = None;
+            }
+            Filter::Atrous(p)
+        }
+        FilterKind::Guided => {
+            only(args.iterations.is_some(), "--iterations", "atrous")?;
+            only(
+                args.sigma_color.is_some() || args.sigma_normal.is_some() || args.sigma_position.is_some(),
+                "--sigma-*",
+                "atrous and bilateral",
+            )?;
+            let d = GuidedParams::paper();
+            let guidance = match args.guidance {
+                None if guide.depth.is_none() => {
+                    eprintln!(
+                        "warning: no depth layer: the guided filter uses normal-only guidance (3 channels)"
+                    );
+                    Guidance::Normal
+                }
+                None | Some(4) => Guidance::NormalDepth,
+                Some(3) => Guidance::Normal,
+                Some(1) => Guidance::GreyNormal,
+                Some(n) => bail!("--guidance must be 1, 3 or 4, got {n}"),
+            };
+            Filter::Guided(GuidedParams {
+                radius: args.radius.unwrap_or(d.radius),
+                guidance,
+                eps_normal: args.eps_normal.unwrap_or(d.eps_normal),
+                eps_depth: args.eps_depth.unwrap_or(d.eps_depth),
+            })
+        }
+        FilterKind::Bilateral => {
+            only(args.iterations.is_some(), "--iterations", "atrous")?;
+            only(
+                args.eps_normal.is_some() || args.eps_depth.is_some() || args.guidance.is_some(),
+                "--eps-*/--guidance",
+                "guided",
+            )?;
+            let d = BilateralParams::reference();
+            let radius = args.radius.unwrap_or(d.radius);
+            let mut p = BilateralParams {
+                radius,
+                sigma_spatial: radius as f32 / 2.0,
+                sigma_color: parse_sigma("sigma-color", &args.sigma_color, d.sigma_color)?,
+                sigma_normal: parse_sigma("sigma-normal", &args.sigma_normal, d.sigma_normal)?,
+                sigma_position: parse_sigma("sigma-position", &args.sigma_position, d.sigma_position)?,
+            };
+            if p.sigma_position.is_some() && !has_pos {
+                eprintln!("warning: no position or depth layer: the position weight is switched off");
+                p.sigma_position = None;
+            }
+            Filter::Bilateral(p)
+        }
+    };
+
+    // Filter (illumination when an albedo is there).
+    let start = std::time::Instant::now();
+    let demodulate = guide.albedo.is_some() && !args.no_demodulate;
+    let filtered = if demodulate {
+        filter.apply_demodulated(&noisy, &guide, args.albedo_eps)?
+    } else {
+        filter.apply(&noisy, &guide)?
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    let result = match (args.layer, input.layer(&["direct"])) {
+        (Layer::Indirect, Some(direct)) if direct.same_size(&filtered) && direct.channels() == 3 => {
+            let mut sum = filtered.clone();
+            for (s, d) in sum.data_mut().iter_mut().zip(direct.data()) {
+                *s += if d.is_finite() { *d } else { 0.0 };
+            }
+            sum
+        }
+        _ => filtered.clone(),
+    };
+    let mut out = ExrImage::new(w, h);
+    out.insert("", &["R", "G", "B"], &result)?;
+    if args.layer == Layer::Indirect {
+        out.insert("indirect_filtered", &["R", "G", "B"], &filtered)?;
+    }
+    write_exr(&args.out, &out).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!(
+        "{} {w}x{h} {:?}{} in {ms:.1} ms -> {}",
+        filter.name(),
+        filter,
+        if demodulate { " (albedo demodulated)" } else { "" },
+        args.out.display()
+    );
+    Ok(())
 }

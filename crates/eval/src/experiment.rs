@@ -57,6 +57,13 @@ pub struct ExperimentSpec {
     pub reference: ReferenceSpec,
     pub scenes: Vec<SceneSpec>,
     pub methods: Vec<MethodSpec>,
+    /// Also denoise the frame of every unfiltered method (filter "none") with Intel Open
+    /// Image Denoise (see [`crate::oidn`]); reported as method "<name>+oidn".
+    #[serde(default)]
+    pub oidn: bool,
+    /// Path of `oidnDenoise` (relative to the spec file); default: `$FILTRACE_OIDN`, PATH.
+    #[serde(default)]
+    pub oidn_executable: Option<PathBuf>,
 }
 
 fn default_max_depth() -> i32 {
@@ -324,6 +331,21 @@ pub fn run_experiment(
     let total = spec.scenes.len() * (1 + spec.methods.len() * spec.spp.len());
     let mut done = 0;
     let mut results = Results { spec: spec.clone(), scenes: vec![], entries: vec![], notes: vec![] };
+    let oidn_exe = if spec.oidn {
+        let from_spec = spec.oidn_executable.as_ref().map(|p| spec_dir.join(p));
+        let exe = crate::oidn::find_executable(from_spec.as_deref());
+        match &exe {
+            Some(p) => results.notes.push(format!(
+                "Intel Open Image Denoise: {} on the unfiltered frames (whole colour, with the guide rays' albedo and normal); its ms include process start and PFM I/O.",
+                p.display()
+            )),
+            None => results.notes.push(format!("OIDN was asked for but oidnDenoise was not found. {}", crate::oidn::HOW_TO_ENABLE)),
+        }
+        exe
+    } else {
+        results.notes.push(crate::oidn::HOW_TO_ENABLE.to_string());
+        None
+    };
     for scene in &spec.scenes {
         let sname = file_stem(&scene.name);
         // The reference: a given file, the cache, or a fresh render.
@@ -406,6 +428,35 @@ pub fn run_experiment(
                     error_map,
                     crop: crop_name,
                 });
+                // Intel Open Image Denoise on the unfiltered frame, same samples.
+                if let (Some(exe), "none", Some(albedo), Some(normal)) =
+                    (&oidn_exe, method.filter.as_str(), &run.albedo, &run.normal)
+                {
+                    let noisy = run.noisy.as_ref().unwrap_or(&run.image);
+                    let (img, ms) = crate::oidn::denoise(exe, &cache.join("oidn"), noisy, albedo, normal)?;
+                    let mut stages = results.entries.last().map(|e| e.stages.clone()).unwrap_or_default();
+                    stages.push(("oidn".to_string(), ms));
+                    let name = format!("{}+oidn", method.name);
+                    let base = format!("{sname}-{name}-{spp}spp");
+                    let (image, error_map, crop_name) =
+                        (format!("{base}.png"), format!("{base}-error.png"), format!("{base}-crop.png"));
+                    crate::report::write_png(&out.join(&image), &img)?;
+                    crate::report::write_png(&out.join(&crop_name), &crate::report::zoomed_crop(&img, crop))?;
+                    let map = crate::metrics::rel_mse_map(&img, &reference).map_err(|e| e.to_string())?;
+                    crate::report::write_error_map(&out.join(&error_map), &map)?;
+                    results.entries.push(Entry {
+                        scene: scene.name.clone(),
+                        method: name,
+                        filter: "oidn".into(),
+                        spp,
+                        errors: errors(&img, &reference)?,
+                        total_ms: stages.iter().map(|s| s.1).sum(),
+                        stages,
+                        image,
+                        error_map,
+                        crop: crop_name,
+                    });
+                }
                 done += 1;
             }
         }

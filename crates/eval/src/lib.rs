@@ -8,5 +8,6 @@ pub mod metrics;
 
 // Experiments and their reports (pipeline/evaluation engineer).
 pub mod experiment;
+pub mod oidn;
 pub mod pfm;
 pub mod report;

@@ -151,10 +151,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     bar.finish_and_clear();
     results.notes.push(format!("{threads} worker threads."));
-    results.notes.push(
-        "Intel Open Image Denoise is not compared in this build (the oidnDenoise route of the issue is not implemented)."
-            .into(),
-    );
     filtrace_eval::report::write_all(&a.out, &results).map_err(|e| anyhow::anyhow!("{e}"))?;
     println!("| scene | method | spp | relMSE | PSNR | frame ms |");
     println!("|---|---|---:|---:|---:|---:|");

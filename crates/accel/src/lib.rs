@@ -382,6 +382,8 @@ impl SceneAccel {
     /// were added, removed or re-pointed at other meshes, or an instance merged at build
     /// time (identity transform) moved, everything is rebuilt instead; after that rebuild
     /// the moved instance has its own entry and later moves are top-level only again.
+    /// Mesh geometry is assumed unchanged since the build (deforming meshes need
+    /// [`SceneAccel::build`]).
     pub fn update_transforms(&mut self, scene: &Scene) {
         let same_structure = scene.instances.len() == self.instances.len()
             && scene.meshes.len() == self.blas.len()

@@ -162,3 +162,31 @@ fn builtins_pass_the_loader_checks_unchanged() {
         assert_eq!(t.stats, s.stats, "{name}: sanitize had to repair something");
     }
 }
+
+#[test]
+fn every_grass_preset_is_well_formed_and_bad_parameters_are_errors() {
+    use filtrace_scene::builtin::{grass_with, GrassParams};
+    for (name, p) in GrassParams::presets() {
+        let s = grass_with(&p).unwrap();
+        let blades = s.meshes.iter().find(|m| m.name == "grass_blades").unwrap();
+        assert_eq!(blades.triangle_count(), 5 * p.blades, "{name}");
+        for t in 0..blades.triangle_count() {
+            let [a, b, c] = blades.triangle(t);
+            assert!((b - a).cross(c - a).length_squared() > 0.0, "{name}: degenerate blade triangle");
+        }
+        let h = blades.bounds().extent().y;
+        assert!(h <= p.height.1 + 1e-5 && h > p.height.0, "{name}: height {h}");
+    }
+    assert_eq!(
+        grass_with(&GrassParams::meadow()).unwrap().triangle_count(),
+        builtin("grass").unwrap().triangle_count()
+    );
+    for bad in [
+        GrassParams { width: (0.0, 0.01), ..GrassParams::meadow() },
+        GrassParams { height: (0.5, 0.2), ..GrassParams::meadow() },
+        GrassParams { width: (f32::NAN, 0.01), ..GrassParams::meadow() },
+        GrassParams { blades: usize::MAX, ..GrassParams::meadow() },
+    ] {
+        assert!(matches!(grass_with(&bad), Err(SceneError::Invalid { .. })), "{bad:?}");
+    }
+}

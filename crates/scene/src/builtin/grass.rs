@@ -6,15 +6,63 @@
 use filtrace_core::{Affine3A, Quat, Rgb, Vec3};
 
 use super::rng::SplitMix64;
+use crate::error::SceneError;
 use crate::shapes;
 use crate::types::{Camera, Environment, Instance, Light, Material, MaterialId, Mesh, Scene};
 
-/// Number of blades.
-pub const BLADES: usize = 16_000;
-/// Seed of the layout.
+/// Parameters of the meadow. Presets: [`GrassParams::meadow`] (the built-in `grass`),
+/// [`GrassParams::sparse`] and [`GrassParams::dense`], to vary how hard the scene is for
+/// screen-space filters (more, thinner blades: more sub-pixel occlusion).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GrassParams {
+    /// Number of blades, scattered uniformly over [-4.8, 4.8]^2 m.
+    pub blades: usize,
+    /// Seed of the layout (SplitMix64).
+    pub seed: u64,
+    /// Blade height range (m).
+    pub height: (f32, f32),
+    /// Blade width range at the base (m); blades taper to 20 % before the tip.
+    pub width: (f32, f32),
+}
+
+impl GrassParams {
+    /// The built-in `grass` scene: 16,000 blades, 20-55 cm tall, 2-5 cm wide.
+    pub fn meadow() -> Self {
+        GrassParams { blades: 16_000, seed: SEED, height: (0.2, 0.55), width: (0.02, 0.05) }
+    }
+
+    /// 2,000 wider blades: the ground shows between them.
+    pub fn sparse() -> Self {
+        GrassParams { blades: 2_000, width: (0.03, 0.07), ..Self::meadow() }
+    }
+
+    /// 60,000 thin blades (300k triangles): almost all sub-pixel at 1080p.
+    pub fn dense() -> Self {
+        GrassParams { blades: 60_000, width: (0.01, 0.03), ..Self::meadow() }
+    }
+
+    /// Every preset, for tests and experiments.
+    pub fn presets() -> [(&'static str, GrassParams); 3] {
+        [("meadow", Self::meadow()), ("sparse", Self::sparse()), ("dense", Self::dense())]
+    }
+}
+
+/// Seed of the built-in layout.
 pub const SEED: u64 = 0x0067_7261_7373; // "grass" in ASCII
 
+/// The built-in `grass` scene ([`GrassParams::meadow`]).
 pub fn grass() -> Scene {
+    // The preset is valid (tested), so this cannot fail.
+    grass_with(&GrassParams::meadow()).unwrap_or_default()
+}
+
+/// The meadow with parameters `p`; an error if a range is empty, not positive or not finite,
+/// or if there are more than 5 million blades.
+pub fn grass_with(p: &GrassParams) -> Result<Scene, SceneError> {
+    let range_ok = |(a, b): (f32, f32)| a.is_finite() && b.is_finite() && a > 0.0 && a <= b;
+    if !range_ok(p.height) || !range_ok(p.width) || p.blades > 5_000_000 {
+        return Err(SceneError::Invalid { message: format!("grass: bad parameters {p:?}") });
+    }
     let mut s = Scene { name: "grass".into(), ..Scene::default() };
     let soil = s.add_material(Material::diffuse("soil", Rgb::new(0.22, 0.16, 0.1)));
     let blade_a = s.add_material(Material::diffuse("grass", Rgb::new(0.12, 0.38, 0.06)));
@@ -30,7 +78,7 @@ pub fn grass() -> Scene {
     ground.positions.iter_mut().for_each(|p| *p *= 40.0);
     s.add_mesh(ground);
 
-    s.add_mesh(blades(BLADES, SEED, [blade_a, blade_b]));
+    s.add_mesh(blades(p, [blade_a, blade_b]));
 
     let sphere = s.meshes.len() as u32;
     let mut m = shapes::sphere(32, rock);
@@ -67,21 +115,21 @@ pub fn grass() -> Scene {
         up: Vec3::Y,
         vfov_deg: 40.0,
     });
-    s
+    Ok(s)
 }
 
-/// `n` blades scattered uniformly over [-4.8, 4.8]^2: each a curved strip of two quads and a
-/// tip triangle, 2-5 cm wide at the base, 20-55 cm tall, bent in a random direction.
-fn blades(n: usize, seed: u64, materials: [MaterialId; 2]) -> Mesh {
-    let mut rng = SplitMix64::new(seed);
+/// `p.blades` blades scattered uniformly over [-4.8, 4.8]^2: each a curved strip of two quads
+/// and a tip triangle, bent in a random direction.
+fn blades(p: &GrassParams, materials: [MaterialId; 2]) -> Mesh {
+    let mut rng = SplitMix64::new(p.seed);
     let mut m = Mesh { name: "grass_blades".into(), ..Mesh::default() };
-    for _ in 0..n {
+    for _ in 0..p.blades {
         let root = Vec3::new(rng.range(-4.8, 4.8), 0.0, rng.range(-4.8, 4.8));
         let facing = rng.range(0.0, std::f32::consts::TAU);
         let side = Vec3::new(facing.cos(), 0.0, facing.sin());
         let bend_dir = Vec3::new(-side.z, 0.0, side.x);
-        let height = rng.range(0.2, 0.55);
-        let width = rng.range(0.02, 0.05);
+        let height = rng.range(p.height.0, p.height.1);
+        let width = rng.range(p.width.0, p.width.1);
         let bend = rng.range(0.05, 0.35) * height;
         let mat = materials[(rng.next_f32() < 0.25) as usize];
         // Points along the spine at t = 0, 0.45, 0.8, 1 with a quadratic bend.

@@ -21,7 +21,7 @@ pub use colonnade::colonnade;
 pub use cornell::{
     cornell, cornell_materials, LIGHT_RADIANCE, LIGHT_Y, MAT_BLUE, MAT_GREEN, MAT_LIGHT, MAT_RED, MAT_WHITE,
 };
-pub use grass::grass;
+pub use grass::{grass, grass_with, GrassParams};
 
 use crate::error::SceneError;
 use crate::types::Scene;

@@ -8,8 +8,8 @@
 //! loses up to `numPixels - 1` samples to rounding ([`Mode::Paper`]). filtrace by
 //! default finishes the method ([`Mode::Exact`]): the `R = s - Σ⌊·⌋` leftover samples
 //! go to the `R` pixels with the largest remainders, found with a linear-time
-//! selection (`select_nth_unstable`) instead of a sort, so a frame uses exactly its
-//! budget.
+//! selection (a remainder histogram, then `select_nth_unstable` within one bin) instead
+//! of a sort, so a frame uses exactly its budget.
 //!
 //! Documented behaviour:
 //! * `budget < minSamples · numPixels` is an error; `budget == minSamples · numPixels`
@@ -222,17 +222,74 @@ pub fn apportion(
                 left -= rounds * pixels;
             }
             if left > 0 {
-                let mut ranks = ranks(&q, s, t);
-                let k = left as usize;
-                ranks.select_nth_unstable_by(k - 1, rank_order);
-                for r in &ranks[..k] {
-                    floors[r.pixel as usize] += 1;
-                }
+                add_largest_remainders(&q, s, t, left as usize, &mut floors);
             }
         }
         _ => {}
     }
     finish(importance, floors, min_spp)
+}
+
+/// Bins of the remainder histogram in [`largest_remainders`].
+const FRAC_BINS: usize = 1 << 16;
+
+/// Adds one sample to each of the `k` pixels first in [`rank_order`], without sorting or
+/// selecting over all pixels: a histogram of the remainders (in `[0, 1)`, 2^16 bins) finds
+/// the bin holding the k-th largest; every pixel in a higher bin gets its sample in one
+/// vectorisable pass, and only the pixels of that bin (about `N / 2^16` unless many quotas
+/// are equal) are ranked in full for the places left. Selecting over all ranks instead
+/// cost 3x the paper's rounding (bench adaptive, 1024x768); this costs about 1.5x.
+fn add_largest_remainders(q: &[f32], s: u64, t: f64, k: usize, floors: &mut [u64]) {
+    debug_assert!(k > 0 && k <= q.len());
+    const CHUNK: usize = 1 << 16;
+    let bins: Vec<u16> = q
+        .par_iter()
+        .map(|&q| ((quota(s, q, t).1 * FRAC_BINS as f64) as usize).min(FRAC_BINS - 1) as u16)
+        .collect();
+    let hist = bins
+        .par_chunks(CHUNK)
+        .map(|c| {
+            let mut h = vec![0u32; FRAC_BINS];
+            for &b in c {
+                h[b as usize] += 1;
+            }
+            h
+        })
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+            a
+        })
+        .unwrap_or_default();
+    // The bin where the count from the top reaches k.
+    let (mut above, mut cut) = (0usize, 0u16);
+    for b in (0..FRAC_BINS).rev() {
+        if above + hist[b] as usize >= k {
+            cut = b as u16;
+            break;
+        }
+        above += hist[b] as usize;
+    }
+    floors.par_chunks_mut(CHUNK).zip(bins.par_chunks(CHUNK)).for_each(|(f, b)| {
+        for (f, &b) in f.iter_mut().zip(b) {
+            *f += (b > cut) as u64;
+        }
+    });
+    let mut ties: Vec<Rank> = bins
+        .par_chunks(CHUNK)
+        .enumerate()
+        .flat_map_iter(|(c, b)| {
+            b.iter().enumerate().filter(move |(_, &b)| b == cut).map(move |(j, _)| {
+                let i = c * CHUNK + j;
+                Rank { frac: quota(s, q[i], t).1, q: q[i], hash: tie_hash(i as u32), pixel: i as u32 }
+            })
+        })
+        .collect();
+    let need = k - above;
+    debug_assert!(need >= 1 && need <= ties.len());
+    ties.select_nth_unstable_by(need - 1, rank_order);
+    for r in &ties[..need] {
+        floors[r.pixel as usize] += 1;
+    }
 }
 
 fn ranks(q: &[f32], s: u64, t: f64) -> Vec<Rank> {

@@ -442,6 +442,9 @@ impl Builder<'_> {
             return Err(self.err(span, "`segments` applies only to shape = \"sphere\""));
         }
         match (&o.mesh, &o.shape) {
+            (Some(_), None) if o.name.is_some() => {
+                Err(self.err(span, "`name` applies only to shapes (a mesh file keeps its own names)"))
+            }
             (Some(file), None) => self.mesh_file(&span, file, transform, material),
             (None, Some(shape)) => {
                 let mat = match material {

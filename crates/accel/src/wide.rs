@@ -300,7 +300,16 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
                     cur = e(first);
                     continue;
                 }
-                // Sort the (2 to 4) hit children by entry distance, farthest first.
+                // Two hits (the most common case): push the farther, visit the nearer.
+                if rest & (rest - 1) == 0 {
+                    let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
+                    let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
+                    stack[sp] = MaybeUninit::new(far);
+                    sp += 1;
+                    cur = near;
+                    continue;
+                }
+                // Sort the (3 or 4) hit children by entry distance, farthest first.
                 let mut hits = [e(first); 4];
                 let mut k = 1;
                 let mut bits = rest;

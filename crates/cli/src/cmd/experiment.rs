@@ -176,36 +176,12 @@ mod tests {
     /// The whole experiment on the real renderer and pipeline at 16x16 (fast tier).
     #[test]
     fn tiny_spec_end_to_end_on_the_cornell_box() {
-        let spec = ExperimentSpec::from_toml(
-            r#"
-name = "tiny"
-width = 16
-height = 16
-max_depth = 3
-spp = [1, 2]
-[reference]
-spp = 16
-[[scenes]]
-name = "cornell"
-[[methods]]
-name = "unfiltered"
-filter = "none"
-indirect_paths = "spp"
-[[methods]]
-name = "guided"
-filter = "guided"
-params = { radius = 4 }
-[[methods]]
-name = "atrous"
-filter = "atrous"
-preset = "interactive"
-"#,
-        )
-        .unwrap();
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
+        let spec = ExperimentSpec::load(&dir.join("tiny.toml")).unwrap();
         let out = std::env::temp_dir().join(format!("filtrace-cli-exp-{}", std::process::id()));
         std::fs::remove_dir_all(&out).ok();
-        let mut b = PipelineBackend::new(Path::new("."));
-        let r = run_experiment(&spec, Path::new("."), &out, &mut b, &mut |_| {}).unwrap();
+        let mut b = PipelineBackend::new(&dir);
+        let r = run_experiment(&spec, &dir, &out, &mut b, &mut |_| {}).unwrap();
         filtrace_eval::report::write_all(&out, &r).unwrap();
         assert_eq!(r.entries.len(), 6);
         for e in &r.entries {
@@ -217,5 +193,28 @@ preset = "interactive"
             assert!(out.join(f).is_file(), "{f}");
         }
         std::fs::remove_dir_all(&out).ok();
+    }
+
+    /// Every checked-in spec parses, and every method's filter choice is valid.
+    #[test]
+    fn checked_in_specs_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let p = entry.unwrap().path();
+            if p.extension().is_some_and(|e| e == "toml") {
+                let spec = ExperimentSpec::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                for m in &spec.methods {
+                    let c = FilterChoice {
+                        name: m.filter.clone(),
+                        preset: m.preset.clone(),
+                        ..Default::default()
+                    };
+                    c.denoise_filter().unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                }
+                n += 1;
+            }
+        }
+        assert!(n >= 3);
     }
 }

@@ -303,8 +303,6 @@ pub struct AdaptiveArgs {
 
 impl AdaptiveArgs {
     /// The adaptive parameters these options select, or `None` without `--adaptive`.
-    // Read by `filtrace render` once it flattens these options (pipeline engineer).
-    #[allow(dead_code)]
     pub fn params(&self) -> Option<filtrace_adaptive::AdaptiveParams> {
         use filtrace_adaptive::{AdaptiveParams, ImportanceParams, Mode};
         self.adaptive.then(|| AdaptiveParams {

@@ -86,12 +86,10 @@ impl FilmPixel {
         if self.samples < 2 {
             return [0.0; 3];
         }
-        let mut v = [0.0; 3];
-        for c in 0..3 {
+        std::array::from_fn(|c| {
             let s2 = ((self.sum_sq[c] - self.sum[c] * self.sum[c] / n) / (n - 1.0)).max(0.0);
-            v[c] = s2 / n;
-        }
-        v
+            s2 / n
+        })
     }
 }
 

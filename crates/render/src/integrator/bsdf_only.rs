@@ -8,7 +8,7 @@
 //! environments. Same depth convention, Russian roulette and direct/indirect split as
 //! [`super::path`].
 
-use super::{vertex_slot, CameraSample, PathContext, PathParams, Split};
+use super::{CameraSample, PathContext, PathParams, Split, VertexSamples};
 use crate::bsdf::SurfaceBsdf;
 use crate::film::VisibleSurface;
 use crate::integrator::path::visible_surface;
@@ -45,26 +45,23 @@ pub fn li(
         let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
-        sampler.set_slot(vertex_slot(vertex) + 2);
-        let u_bsdf = sampler.next_2d();
-        let u_lobe = sampler.next_1d();
-        let u_rr = sampler.next_1d();
-        let Some(bs) = bsdf.sample(wo, u_bsdf, u_lobe) else { break };
+        let u = VertexSamples::draw(sampler, vertex);
+        let Some(bs) = bsdf.sample(wo, u.u_bsdf, u.u_lobe) else { break };
         beta *= bs.f * (bs.wi.z.abs() / bs.pdf);
         if beta == Rgb::ZERO || !beta.is_finite() {
             break;
         }
         let wi = frame.to_world(bs.wi);
         let ray = si.spawn_ray(wi);
-        vertex += 1;
         // Russian roulette.
-        if vertex + 1 >= params.rr_depth {
+        if vertex + 2 >= params.rr_depth {
             let q = beta.max_element().min(0.95);
-            if u_rr >= q {
+            if VertexSamples::russian_roulette(sampler, vertex) >= q {
                 break;
             }
             beta /= q;
         }
+        vertex += 1;
         match ctx.intersect(&ray) {
             Some(next) => si = next,
             None => {

@@ -138,15 +138,52 @@ pub struct CameraSample {
 }
 
 /// Sampler slot plan. Slot 0 is the pixel jitter; each path vertex then owns
-/// [`SLOTS_PER_VERTEX`] slots, used whatever branches are taken so that the dimensions of a
-/// vertex never depend on what happened before it.
+/// [`SLOTS_PER_VERTEX`] slots at fixed offsets, so that the dimensions of a vertex never
+/// depend on the branches taken before it.
 pub const SLOT_PIXEL: u32 = 0;
-/// Slots per vertex: light selection (1D), light position (2D), BSDF direction (2D),
-/// BSDF lobe (1D), Russian roulette (1D).
-pub const SLOTS_PER_VERTEX: u32 = 5;
+/// Slots per vertex: see the `SLOT_*` offsets.
+pub const SLOTS_PER_VERTEX: u32 = 4;
+/// Offset of the light-sample position (2D).
+pub const SLOT_LIGHT: u32 = 0;
+/// Offset of the BSDF direction (2D).
+pub const SLOT_BSDF: u32 = 1;
+/// Offset of (light selection, BSDF lobe choice), one 2D slot: two 1D choices share one
+/// (0,2)-sequence, which costs one slot instead of two.
+pub const SLOT_CHOICES: u32 = 2;
+/// Offset of the Russian-roulette decision (1D, drawn only when roulette is played).
+pub const SLOT_RR: u32 = 3;
 
 /// First sampler slot of path vertex `vertex`.
 #[inline]
 pub fn vertex_slot(vertex: u32) -> u32 {
     1 + vertex.saturating_mul(SLOTS_PER_VERTEX)
+}
+
+/// The random numbers of one path vertex except Russian roulette.
+#[derive(Clone, Copy, Debug)]
+pub struct VertexSamples {
+    pub u_light: filtrace_core::Vec2,
+    pub u_bsdf: filtrace_core::Vec2,
+    pub u_select: f32,
+    pub u_lobe: f32,
+}
+
+impl VertexSamples {
+    /// Draws the samples of vertex `vertex` from `sampler`.
+    #[inline]
+    pub fn draw(sampler: &mut filtrace_core::sampler::Sampler, vertex: u32) -> Self {
+        let base = vertex_slot(vertex);
+        sampler.set_slot(base + SLOT_LIGHT);
+        let u_light = sampler.next_2d();
+        let u_bsdf = sampler.next_2d();
+        let choices = sampler.next_2d();
+        Self { u_light, u_bsdf, u_select: choices.x, u_lobe: choices.y }
+    }
+
+    /// The Russian-roulette number of vertex `vertex`.
+    #[inline]
+    pub fn russian_roulette(sampler: &mut filtrace_core::sampler::Sampler, vertex: u32) -> f32 {
+        sampler.set_slot(vertex_slot(vertex) + SLOT_RR);
+        sampler.next_1d()
+    }
 }

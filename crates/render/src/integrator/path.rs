@@ -22,7 +22,7 @@
 //! `color`), and the all-zero visible surface (albedo 0, normal 0 = "no surface", position 0,
 //! depth 0).
 
-use super::{vertex_slot, CameraSample, PathContext, PathParams, Split};
+use super::{CameraSample, PathContext, PathParams, Split, VertexSamples};
 use crate::bsdf::SurfaceBsdf;
 use crate::film::VisibleSurface;
 use crate::surface::SurfaceInteraction;
@@ -103,20 +103,15 @@ pub fn trace_from_hit(
         let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
-        sampler.set_slot(vertex_slot(vertex));
-        let u_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        let u_bsdf = sampler.next_2d();
-        let u_lobe = sampler.next_1d();
-        let u_rr = sampler.next_1d();
+        let u = VertexSamples::draw(sampler, vertex);
 
         // Next-event estimation: one light sample, MIS-weighted against BSDF sampling. The
         // light reaches the eye over the vertices 0..=vertex, as emission found at vertex + 1
         // by BSDF sampling would, so it belongs to the component of vertex + 1.
-        l.add(vertex + 1, beta * sample_one_light(ctx, &si, &bsdf, &frame, wo, u_select, u_light));
+        l.add(vertex + 1, beta * sample_one_light(ctx, &si, &bsdf, &frame, wo, u.u_select, u.u_light));
 
         // BSDF sampling for the next direction.
-        let Some(bs) = bsdf.sample(wo, u_bsdf, u_lobe) else { break };
+        let Some(bs) = bsdf.sample(wo, u.u_bsdf, u.u_lobe) else { break };
         let wi = frame.to_world(bs.wi);
         beta *= bs.f * (bs.wi.z.abs() / bs.pdf);
         p_b = bs.pdf;
@@ -127,16 +122,16 @@ pub fn trace_from_hit(
             break;
         }
         let ray = si.spawn_ray(wi);
-        vertex += 1;
 
         // Russian roulette once the path has rr_depth segments.
-        if vertex + 1 >= params.rr_depth {
+        if vertex + 2 >= params.rr_depth {
             let q = beta.max_element().min(0.95);
-            if u_rr >= q {
+            if VertexSamples::russian_roulette(sampler, vertex) >= q {
                 break;
             }
             beta /= q;
         }
+        vertex += 1;
 
         // Find the next vertex; a miss adds the environment, MIS-weighted.
         match ctx.intersect(&ray) {
@@ -173,7 +168,8 @@ fn sample_one_light(
 ) -> Rgb {
     let Some(ls) = ctx.lights.sample_li(si.p, u_select, u_light) else { return Rgb::ZERO };
     let p_l = ls.pdf;
-    if !(p_l > 0.0) || ls.li == Rgb::ZERO {
+    // `p_l` NaN or <= 0: no usable sample.
+    if p_l.is_nan() || p_l <= 0.0 || ls.li == Rgb::ZERO {
         return Rgb::ZERO;
     }
     let wi = frame.to_local(ls.wi);
@@ -194,17 +190,13 @@ pub fn direct_light(ctx: &PathContext, si: &SurfaceInteraction, sampler: &mut Sa
     let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
     let frame = Frame::from_z(si.n_s);
     let wo = frame.to_local(si.wo);
-    sampler.set_slot(vertex_slot(0));
-    let u_select = sampler.next_1d();
-    let u_light = sampler.next_2d();
-    let u_bsdf = sampler.next_2d();
-    let u_lobe = sampler.next_1d();
+    let u = VertexSamples::draw(sampler, 0);
 
     // Light sampling.
-    let mut l_d = sample_one_light(ctx, si, &bsdf, &frame, wo, u_select, u_light);
+    let mut l_d = sample_one_light(ctx, si, &bsdf, &frame, wo, u.u_select, u.u_light);
 
     // BSDF sampling: emission (or environment) found by the sampled direction.
-    let Some(bs) = bsdf.sample(wo, u_bsdf, u_lobe) else { return l_d };
+    let Some(bs) = bsdf.sample(wo, u.u_bsdf, u.u_lobe) else { return l_d };
     let wi = frame.to_world(bs.wi);
     let beta = bs.f * (bs.wi.z.abs() / bs.pdf);
     if beta == Rgb::ZERO || !beta.is_finite() {

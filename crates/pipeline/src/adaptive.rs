@@ -108,3 +108,82 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         Ok((frame, plan))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lookup::HitGeometry;
+    use crate::source::EyeSample;
+    use crate::NoFilter;
+    use filtrace_core::{Rgb, Vec3};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::Mutex;
+
+    /// Analytic frame: sky in the top rows, a floor facing +y below with a wall facing -z on
+    /// the right half (a crease). Counts every indirect path asked for, per pixel.
+    struct Crease {
+        w: u32,
+        paths: AtomicU64,
+        per_pixel: Mutex<Vec<u32>>,
+    }
+
+    impl PathSource for Crease {
+        fn trace(&self, key: SampleKey, _film: Vec2, indirect_paths: u32) -> EyeSample {
+            self.paths.fetch_add(indirect_paths as u64, Ordering::Relaxed);
+            if indirect_paths > 0 {
+                self.per_pixel.lock().unwrap()[(key.y * self.w + key.x) as usize] += indirect_paths;
+            }
+            if key.y < 2 {
+                return EyeSample::default(); // sky
+            }
+            let (normal, position) = if key.x < self.w / 2 {
+                (Vec3::Y, Vec3::new(key.x as f32, 0.0, key.y as f32))
+            } else {
+                (-Vec3::Z, Vec3::new(key.x as f32, key.y as f32, 0.0))
+            };
+            EyeSample {
+                hit: Some(HitGeometry { normal, depth: 1.0 }),
+                albedo: Rgb::splat(0.5),
+                position,
+                direct: Rgb::ZERO,
+                indirect: Rgb::splat(0.25),
+            }
+        }
+    }
+
+    #[test]
+    fn adaptive_frame_traces_exactly_the_budget_where_planned() {
+        let (w, h) = (16u32, 10u32);
+        let n = (w * h) as usize;
+        let src = Crease { w, paths: AtomicU64::new(0), per_pixel: Mutex::new(vec![0; n]) };
+        let mut r = FilteredRenderer::new(&src, NoFilter, PipelineSettings::interactive(w, h)).unwrap();
+        let params = AdaptiveParams::paper();
+        let plan = {
+            let (_, plan) = r.render_frame_adaptive(&params).unwrap();
+            plan
+        };
+        // The frame traced exactly the budget (the pre-pass traces no indirect path).
+        assert_eq!(src.paths.load(Ordering::Relaxed), 4 * n as u64);
+        assert_eq!(plan.counts.total(), 4 * n as u64);
+        // ... and each pixel exactly its planned count.
+        assert_eq!(*src.per_pixel.lock().unwrap(), plan.counts.counts());
+        // Sky is background: importance 0 and the minimum; the crease is the most important.
+        let imp = |x: u32, y: u32| plan.importance.pixel(x as usize, y as usize)[0];
+        for x in 0..w {
+            assert_eq!(imp(x, 0), 0.0);
+            assert_eq!(plan.counts.counts()[x as usize], params.min_spp);
+        }
+        assert!(imp(w / 2, 6) > imp(2, 6), "{} vs {}", imp(w / 2, 6), imp(2, 6));
+        assert!(plan.counts.counts()[(6 * w + w / 2) as usize] > plan.counts.counts()[(6 * w + 2) as usize]);
+    }
+
+    #[test]
+    fn bad_adaptive_parameters_are_errors_not_panics() {
+        let src = Crease { w: 4, paths: AtomicU64::new(0), per_pixel: Mutex::new(vec![0; 16]) };
+        let mut r = FilteredRenderer::new(&src, NoFilter, PipelineSettings::interactive(4, 4)).unwrap();
+        let params = AdaptiveParams { budget_spp: 1, min_spp: 2, ..AdaptiveParams::paper() };
+        let e = r.render_frame_adaptive(&params).map(|_| ()).unwrap_err();
+        assert!(matches!(e, AdaptiveFrameError::Adaptive(AdaptiveError::BudgetBelowMinimum { .. })), "{e}");
+        assert!(e.to_string().contains("below the minimum"));
+    }
+}

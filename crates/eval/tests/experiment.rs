@@ -122,6 +122,8 @@ fn tiny_spec_end_to_end_with_reference_cache() {
             && html.contains("cornell-noisy-4spp.png")
             && html.contains("cornell-reference-crop.png")
     );
+    // Without `oidn = true` the report says how to enable the OIDN comparison.
+    assert!(html.contains("oidnDenoise") && html.contains("pyoidn"));
 
     // Second run: the references come from the cache.
     let again = run_experiment(&spec, Path::new("."), &out, &mut backend, &mut |_| {}).unwrap();

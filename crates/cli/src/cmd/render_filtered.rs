@@ -134,34 +134,22 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
     let build_s = pipeline.source().renderer().build_seconds();
-    // Adaptive sampling (Bauszat et al. 2011b): a G-buffer pass (guide rays without indirect
-    // paths), the importance map from its normals and positions, the apportioned per-pixel
-    // indirect path counts, then the frame with those counts.
+    // Adaptive sampling (Bauszat et al. 2011b, `filtrace_pipeline::adaptive`): a G-buffer
+    // pre-pass of the guide rays, the importance map from its normals and positions, the
+    // apportioned per-pixel indirect path counts, then the frame with those counts.
     let mut plan_ms = None;
     let mut adaptive_layers = None;
-    let counts = match adaptive.params() {
-        None => None,
+    let frame = match adaptive.params() {
+        None => pool.install(|| pipeline.render_frame().cloned()).map_err(|e| anyhow::anyhow!("{e}"))?,
         Some(params) => {
-            let t = Instant::now();
-            let zero = vec![0u32; settings.width as usize * settings.height as usize];
-            let planned = pool.install(|| -> anyhow::Result<_> {
-                let g = &pipeline
-                    .render_frame_with_counts(Some(&zero))
-                    .map_err(|e| anyhow::anyhow!("{e}"))?
-                    .images
-                    .guide;
-                filtrace_adaptive::plan_frame(&g.normal, &g.position, &params)
-                    .map_err(|e| anyhow::anyhow!("{e}"))
-            })?;
-            plan_ms = Some(t.elapsed().as_secs_f64() * 1e3);
-            let (importance, counts) = planned;
-            adaptive_layers = Some((importance, counts.to_image()));
-            Some(counts.counts().to_vec())
+            let (frame, plan) = pool
+                .install(|| pipeline.render_frame_adaptive(&params).map(|(f, p)| (f.clone(), p)))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            plan_ms = Some(plan.prepass_ms + plan.plan_ms);
+            adaptive_layers = Some((plan.importance, plan.counts.to_image()));
+            frame
         }
     };
-    let frame = pool
-        .install(|| pipeline.render_frame_with_counts(counts.as_deref()).cloned())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let out = common.output_path();
     let extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
         Some((importance, counts)) => {

@@ -9,6 +9,12 @@
 //! every sample gets the weight 1. **Sample 0 of every pixel goes through the pixel centre**:
 //! it is the *guide ray* of Bauszat et al. 2011 (sec. 4.1), and the G-buffer (albedo,
 //! normal, position, depth) comes from it, so G-buffers are free of sub-pixel jitter.
+//!
+//! Cost of that choice: the colour estimate of a pixel is biased by
+//! `(L(centre) - mean over the pixel) / spp`. It vanishes as spp grows but is visible at very
+//! low counts where the image has sub-pixel detail: on the Cornell box (thin light sliver)
+//! at 64 x 64 the image mean of sample 0 alone is 3.6% below that of a jittered sample; at
+//! 64 spp the effect on the mean is < 0.1%, at 256 spp < 0.02%.
 
 use filtrace_core::{Aabb, Ray, Vec2, Vec3};
 use filtrace_scene::Camera;

@@ -609,3 +609,27 @@ fn demodulation_keeps_texture_sharp() {
     assert!(demodulate(&color, &Image::new(3, 3, 3), 0.01).is_err());
     assert!(demodulate(&color, &albedo, 0.0).is_err());
 }
+
+/// Weight sums that underflow (every neighbour extremely far in colour) must not turn into
+/// `0 * inf = NaN`: the pixel keeps its own value instead.
+#[test]
+fn underflowing_weight_sums_stay_finite() {
+    let (w, h) = (9, 9);
+    let normal = Image::from_vec(w, h, 3, [0.0, 0.0, 1.0].repeat(w * h)).unwrap();
+    let g = GBuffer::new(normal);
+    // Every colour invalid but one far-off corner: a pixel two steps away sees only that
+    // corner, through the B3 kernel's smallest weight (1/256) times exp(-87).
+    let mut color = Image::filled(w, h, 3, f32::NAN);
+    color.set_rgb(0, 0, Vec3::splat(1e4));
+    let p = AtrousParams { iterations: 3, sigma_color: Some(1e-3), sigma_normal: None, sigma_position: None };
+    let out = atrous(&color, &g, &p).unwrap();
+    assert_eq!(out.count_non_finite(), 0);
+    let b = BilateralParams {
+        radius: 3,
+        sigma_spatial: 2.0,
+        sigma_color: Some(1e-3),
+        sigma_normal: None,
+        sigma_position: None,
+    };
+    assert_eq!(bilateral(&color, &g, &b).unwrap().count_non_finite(), 0);
+}

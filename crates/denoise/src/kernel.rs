@@ -153,6 +153,190 @@ fn tap_row_any(a: &RowArgs, acc: &mut [&mut [f32]; 4], terms: (bool, bool, bool)
     }
 }
 
+/// The interior of a row, where every tap lands inside the image: register-blocked, `B`
+/// pixels at a time with their centre values and accumulators held in registers while the
+/// taps stream past (taps inner, pixels outer). Same arithmetic in the same order as
+/// [`tap_row_v`] followed by the normalisation of [`edge_avoiding_pass`], so the results are
+/// bit-identical to the tiled path; it only saves re-loading the 10 centre planes and the
+/// 4 accumulators per tap.
+struct BlockArgs<'a> {
+    c: [&'a [f32]; 3],
+    n: [&'a [f32]; 3],
+    x: [&'a [f32]; 3],
+    s: &'a [f32],
+    v: Option<&'a [f32]>,
+    /// Per tap: flat offset `dy * width + dx` and kernel weight `h`.
+    offs: &'a [(isize, f32)],
+    inv: [f32; 3],
+}
+
+#[inline(always)]
+fn ld<const B: usize>(s: &[f32], i: usize) -> [f32; B] {
+    let mut r = [0.0f32; B];
+    r.copy_from_slice(&s[i..i + B]);
+    r
+}
+
+#[inline(always)]
+fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
+    [ld::<B>(s[0], i), ld::<B>(s[1], i), ld::<B>(s[2], i)]
+}
+
+#[inline(always)]
+fn dist2_acc<const B: usize>(e: &mut [f32; B], p: &[[f32; B]; 3], q: &[[f32; B]; 3], inv: f32) {
+    for i in 0..B {
+        let (d0, d1, d2) = (p[0][i] - q[0][i], p[1][i] - q[1][i], p[2][i] - q[2][i]);
+        e[i] += (d0 * d0 + d1 * d1 + d2 * d2) * inv;
+    }
+}
+
+/// Filters the pixels `p0 .. p0 + B * blocks` (flat indices, all interior) into `out`
+/// (`out[c][0]` is pixel `p0`).
+#[inline(always)]
+fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const B: usize>(
+    a: &BlockArgs,
+    p0: usize,
+    blocks: usize,
+    out: &mut [&mut [f32]; 3],
+) {
+    let zero = [[0.0f32; B]; 3];
+    for b in 0..blocks {
+        let p = p0 + b * B;
+        let pc = ld3::<B>(&a.c, p);
+        let pn = if WN { ld3::<B>(&a.n, p) } else { zero };
+        let px = if WX { ld3::<B>(&a.x, p) } else { zero };
+        let ps = ld::<B>(a.s, p);
+        let mut acc = [[0.0f32; B]; 4];
+        for &(off, h) in a.offs {
+            let q = (p as isize + off) as usize;
+            let qc = ld3::<B>(&a.c, q);
+            let mut e = [0.0f32; B];
+            if WC {
+                dist2_acc(&mut e, &pc, &qc, a.inv[0]);
+            }
+            if WN {
+                dist2_acc(&mut e, &pn, &ld3::<B>(&a.n, q), a.inv[1]);
+            }
+            if WX {
+                dist2_acc(&mut e, &px, &ld3::<B>(&a.x, q), a.inv[2]);
+            }
+            let qs = ld::<B>(a.s, q);
+            let qv = if V { ld::<B>(a.v.unwrap_or(a.s), q) } else { [0.0; B] };
+            for i in 0..B {
+                let mut w = h * (1.0 - (ps[i] - qs[i]).abs());
+                if V {
+                    w *= qv[i];
+                }
+                if WC || WN || WX {
+                    w *= exp_neg(e[i]);
+                }
+                acc[0][i] += w * qc[0][i];
+                acc[1][i] += w * qc[1][i];
+                acc[2][i] += w * qc[2][i];
+                acc[3][i] += w;
+            }
+        }
+        let o = b * B;
+        for i in 0..B {
+            if acc[3][i] > 1e-30 {
+                let inv_w = 1.0 / acc[3][i];
+                for c in 0..3 {
+                    out[c][o + i] = acc[c][i] * inv_w;
+                }
+            } else {
+                for c in 0..3 {
+                    out[c][o + i] = pc[c][i];
+                }
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn blocks<const WC: bool, const WN: bool, const WX: bool, const B: usize>(
+    a: &BlockArgs,
+    p0: usize,
+    n: usize,
+    out: &mut [&mut [f32]; 3],
+) {
+    if a.v.is_some() {
+        blocks_v::<WC, WN, WX, true, B>(a, p0, n, out)
+    } else {
+        blocks_v::<WC, WN, WX, false, B>(a, p0, n, out)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn blocks_avx2<const WC: bool, const WN: bool, const WX: bool>(
+    a: &BlockArgs,
+    p0: usize,
+    n: usize,
+    out: &mut [&mut [f32]; 3],
+) {
+    blocks::<WC, WN, WX, 8>(a, p0, n, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn blocks_avx512<const WC: bool, const WN: bool, const WX: bool>(
+    a: &BlockArgs,
+    p0: usize,
+    n: usize,
+    out: &mut [&mut [f32]; 3],
+) {
+    blocks::<WC, WN, WX, 16>(a, p0, n, out)
+}
+
+/// Block width (pixels) of [`blocks_any`] for an instruction set: one vector register.
+fn block_width(isa: Isa) -> usize {
+    match isa {
+        Isa::Avx512 => 16,
+        Isa::Avx2 => 8,
+        Isa::Base => 4,
+    }
+}
+
+#[inline(always)]
+fn blocks_dispatch<const WC: bool, const WN: bool, const WX: bool>(
+    a: &BlockArgs,
+    p0: usize,
+    n: usize,
+    out: &mut [&mut [f32]; 3],
+    isa: Isa,
+) {
+    #[cfg(target_arch = "x86_64")]
+    match isa {
+        // SAFETY: `isa()` reports Avx512 / Avx2 only when those features were detected.
+        Isa::Avx512 => return unsafe { blocks_avx512::<WC, WN, WX>(a, p0, n, out) },
+        Isa::Avx2 => return unsafe { blocks_avx2::<WC, WN, WX>(a, p0, n, out) },
+        Isa::Base => {}
+    }
+    let _ = isa;
+    blocks::<WC, WN, WX, 4>(a, p0, n, out)
+}
+
+/// `n` blocks of [`block_width`]`(isa)` pixels from flat index `p0`.
+fn blocks_any(
+    a: &BlockArgs,
+    p0: usize,
+    n: usize,
+    out: &mut [&mut [f32]; 3],
+    terms: (bool, bool, bool),
+    isa: Isa,
+) {
+    match terms {
+        (false, false, false) => blocks_dispatch::<false, false, false>(a, p0, n, out, isa),
+        (true, false, false) => blocks_dispatch::<true, false, false>(a, p0, n, out, isa),
+        (false, true, false) => blocks_dispatch::<false, true, false>(a, p0, n, out, isa),
+        (false, false, true) => blocks_dispatch::<false, false, true>(a, p0, n, out, isa),
+        (true, true, false) => blocks_dispatch::<true, true, false>(a, p0, n, out, isa),
+        (true, false, true) => blocks_dispatch::<true, false, true>(a, p0, n, out, isa),
+        (false, true, true) => blocks_dispatch::<false, true, true>(a, p0, n, out, isa),
+        (true, true, true) => blocks_dispatch::<true, true, true>(a, p0, n, out, isa),
+    }
+}
+
 /// Pixels per tile of a row: the tile's centre values (10 planes) and accumulators (4) stay
 /// in L1 while the 25 (or `(2r+1)^2`) taps stream over it. 256 chosen: whole 1920-pixel rows
 /// (77 KB of centre values) spilled to L2 and ran 1.6x slower (bench filters, 1080p).
@@ -187,12 +371,46 @@ pub(crate) fn edge_avoiding_pass(
     let inv =
         [terms.inv_color.unwrap_or(0.0), terms.inv_normal.unwrap_or(0.0), terms.inv_position.unwrap_or(0.0)];
     let isa = isa();
+    // Tap extents and flat offsets for the register-blocked interior.
+    let dx_min = taps.iter().map(|t| t.dx).min().unwrap_or(0);
+    let dx_max = taps.iter().map(|t| t.dx).max().unwrap_or(0);
+    let dy_min = taps.iter().map(|t| t.dy).min().unwrap_or(0);
+    let dy_max = taps.iter().map(|t| t.dy).max().unwrap_or(0);
+    let offs: Vec<(isize, f32)> = taps.iter().map(|t| (t.dy * w as isize + t.dx, t.h)).collect();
+    let bw = block_width(isa);
+    let blk = BlockArgs {
+        c: [&src[0], &src[1], &src[2]],
+        n: [&g.normal[0], &g.normal[1], &g.normal[2]],
+        x: pos,
+        s: &g.surface,
+        v: valid,
+        offs: &offs,
+        inv,
+    };
     let [d0, d1, d2] = dst;
     d0.par_chunks_mut(w).zip(d1.par_chunks_mut(w)).zip(d2.par_chunks_mut(w)).enumerate().for_each_init(
         || vec![0.0f32; 4 * TILE],
         |scratch, (y, ((o0, o1), o2))| {
-            for t0 in (0..w).step_by(TILE) {
-                let t1 = (t0 + TILE).min(w);
+            // Interior blocks [fx0, fx1): every tap inside the image, no per-tap clipping.
+            let yi = y as isize;
+            let (mut fx0, mut fx1) = (0usize, 0usize);
+            if yi + dy_min >= 0 && yi + dy_max < h as isize {
+                let a = (-dx_min).max(0) as usize;
+                let b = (w as isize - dx_max.max(0)).max(0) as usize;
+                if b > a {
+                    let nb = (b - a) / bw;
+                    (fx0, fx1) = (a, a + nb * bw);
+                    if nb > 0 {
+                        let mut out = [&mut o0[fx0..fx1], &mut o1[fx0..fx1], &mut o2[fx0..fx1]];
+                        blocks_any(&blk, y * w + fx0, nb, &mut out, flags, isa);
+                    }
+                }
+            }
+            // The rest (borders) by tiles, clipping each tap to the image.
+            let spans = [(0, fx0), (fx1, w)];
+            for t0 in spans.iter().flat_map(|&(r0, r1)| (r0..r1).step_by(TILE).map(move |t0| (t0, r1))) {
+                let (t0, r1) = t0;
+                let t1 = (t0 + TILE).min(r1);
                 let tw = t1 - t0;
                 scratch.fill(0.0);
                 let (s0, rest) = scratch.split_at_mut(TILE);

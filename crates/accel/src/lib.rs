@@ -56,7 +56,7 @@ pub use sah::BuildParams;
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};
 use filtrace_scene::{Mesh, Scene};
 use rayon::prelude::*;
-use tri4::Tri4;
+use tri4::{Ray4, Tri4};
 use triangle::WatertightRay;
 use wide::{Node4, RayBoxes};
 
@@ -122,8 +122,11 @@ impl Blas {
     #[inline(always)]
     fn intersect(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
         let rb = RayBoxes::new(o, d);
-        let mut leaves =
-            ClosestPackets { packets: &self.packets, ray: WatertightRay::new(o, d), t_min, best: None };
+        let mut leaves = ClosestPackets {
+            packets: &self.packets,
+            ray: Ray4::new(WatertightRay::new(o, d), t_min),
+            best: None,
+        };
         wide::traverse::<_, true>(&self.nodes, &rb, t_min, t_max, &mut leaves);
         leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
@@ -132,7 +135,7 @@ impl Blas {
     fn occluded(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
         let rb = RayBoxes::new(o, d);
         let mut t_max = t_max;
-        let leaves = AnyPacket { packets: &self.packets, ray: WatertightRay::new(o, d), t_min };
+        let leaves = AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 
@@ -201,8 +204,7 @@ pub struct BvhStats {
 /// Closest-hit leaf test over triangle packets; `best` holds `(t, u, v, 4 packet + lane)`.
 struct ClosestPackets<'a> {
     packets: &'a [Tri4],
-    ray: WatertightRay,
-    t_min: f32,
+    ray: Ray4,
     best: Option<(f32, f32, f32, usize)>,
 }
 
@@ -212,7 +214,7 @@ impl wide::Leaves for &mut ClosestPackets<'_> {
         for i in first..first + count {
             // SAFETY: leaf ranges lie inside `packets` (checked by `validate`).
             let p = unsafe { self.packets.get_unchecked(i as usize) };
-            if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, self.t_min, *t_max) {
+            if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, *t_max) {
                 *t_max = t;
                 self.best = Some((t, u, v, 4 * i as usize + lane));
             }
@@ -229,8 +231,7 @@ impl wide::Leaves for &mut ClosestPackets<'_> {
 /// Any-hit leaf test over triangle packets.
 struct AnyPacket<'a> {
     packets: &'a [Tri4],
-    ray: WatertightRay,
-    t_min: f32,
+    ray: Ray4,
 }
 
 impl wide::Leaves for AnyPacket<'_> {
@@ -239,7 +240,7 @@ impl wide::Leaves for AnyPacket<'_> {
         (first..first + count).any(|i| {
             // SAFETY: as in `ClosestPackets`.
             let p = unsafe { self.packets.get_unchecked(i as usize) };
-            tri4::occluded4(&self.ray, p, self.t_min, *t_max)
+            tri4::occluded4(&self.ray, p, *t_max)
         })
     }
 

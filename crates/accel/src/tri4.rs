@@ -40,17 +40,43 @@ impl Tri4 {
     }
 }
 
+/// A ray prepared for [`Tri4`] tests: the watertight constants plus, computed once per ray
+/// instead of once per packet, the permuted origin and shear factors splatted to four lanes
+/// and the row offsets of the permuted axes.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ray4 {
+    /// `org[kx], org[ky], org[kz]` in every lane.
+    o: [[f32; 4]; 3],
+    /// `S_x, S_y, S_z` in every lane.
+    s: [[f32; 4]; 3],
+    /// `t_min` in every lane.
+    t_min: [f32; 4],
+    /// Offsets (in floats) of the `kx, ky, kz` rows inside a corner of a [`Tri4`].
+    row: [usize; 3],
+    pub ray: WatertightRay,
+}
+
+impl Ray4 {
+    #[inline(always)]
+    pub fn new(ray: WatertightRay, t_min: f32) -> Self {
+        let k = [ray.kx, ray.ky, ray.kz];
+        Self {
+            o: k.map(|k| [ray.org[k]; 4]),
+            s: [[ray.sx; 4], [ray.sy; 4], [ray.sz; 4]],
+            t_min: [t_min; 4],
+            row: k.map(|k| 4 * k),
+            ray,
+        }
+    }
+}
+
 /// Closest hit among the four triangles with `t` in `[t_min, t_max]`:
 /// `(t, u, v, lane)`. The lowest lane wins a tie, as in the scalar order.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub(crate) fn intersect4(
-    r: &WatertightRay,
-    p: &Tri4,
-    t_min: f32,
-    t_max: f32,
-) -> Option<(f32, f32, f32, usize)> {
-    let (mask, t, u, v) = test4(r, p, t_min, t_max);
+pub(crate) fn intersect4(r: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
+    let (mask, t, u, v) = test4(r, p, t_max);
     if mask == 0 {
         return None;
     }
@@ -70,27 +96,30 @@ pub(crate) fn intersect4(
 /// True when any of the four triangles is hit with `t` in `[t_min, t_max]`.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub(crate) fn occluded4(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> bool {
-    test4(r, p, t_min, t_max).0 != 0
+pub(crate) fn occluded4(r: &Ray4, p: &Tri4, t_max: f32) -> bool {
+    test4(r, p, t_max).0 != 0
 }
 
 /// Hit mask and per-lane `t, u, v` (valid where the mask bit is set).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn test4(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4]) {
+fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4]) {
     use std::arch::x86_64::*;
-    // SAFETY: SSE is part of the x86_64 baseline; `Tri4` rows are 16-byte aligned and
-    // `kx, ky, kz < 3`.
+    // SAFETY: SSE is part of the x86_64 baseline; `Tri4` rows and the `Ray4` splats are
+    // 16-byte aligned and the row offsets are `4 * k` with `k < 3`.
     unsafe {
         let base = p.v.as_ptr() as *const f32;
-        let row = |corner: usize, axis: usize| _mm_load_ps(base.add(12 * corner + 4 * axis));
-        let (ox, oy, oz) = (_mm_set1_ps(r.org[r.kx]), _mm_set1_ps(r.org[r.ky]), _mm_set1_ps(r.org[r.kz]));
-        let (sx, sy, sz) = (_mm_set1_ps(r.sx), _mm_set1_ps(r.sy), _mm_set1_ps(r.sz));
+        let [rx, ry, rz] = r4.row;
+        let row = |corner: usize, off: usize| _mm_load_ps(base.add(12 * corner + off));
+        let (ox, oy, oz) =
+            (_mm_load_ps(r4.o[0].as_ptr()), _mm_load_ps(r4.o[1].as_ptr()), _mm_load_ps(r4.o[2].as_ptr()));
+        let (sx, sy, sz) =
+            (_mm_load_ps(r4.s[0].as_ptr()), _mm_load_ps(r4.s[1].as_ptr()), _mm_load_ps(r4.s[2].as_ptr()));
         // Translate, shear and scale each corner (Woop et al. 2013, steps 1-2).
         let corner = |c: usize| {
-            let x = _mm_sub_ps(row(c, r.kx), ox);
-            let y = _mm_sub_ps(row(c, r.ky), oy);
-            let z = _mm_sub_ps(row(c, r.kz), oz);
+            let x = _mm_sub_ps(row(c, rx), ox);
+            let y = _mm_sub_ps(row(c, ry), oy);
+            let z = _mm_sub_ps(row(c, rz), oz);
             (_mm_sub_ps(x, _mm_mul_ps(sx, z)), _mm_sub_ps(y, _mm_mul_ps(sy, z)), _mm_mul_ps(sz, z))
         };
         let (ax, ay, az) = corner(0);
@@ -106,7 +135,7 @@ fn test4(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f32; 4],
         if _mm_movemask_ps(on_edge) != 0 {
             // Rare: a ray exactly on an edge needs the f64 recomputation; use the scalar
             // test lane by lane.
-            return test4_scalar(r, p, t_min, t_max);
+            return test4_scalar(&r4.ray, p, r4.t_min[0], t_max);
         }
         let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
         let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
@@ -120,7 +149,8 @@ fn test4(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f32; 4],
         let t_scaled = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)), _mm_mul_ps(w, cz));
         let rcp = _mm_div_ps(_mm_set1_ps(1.0), det);
         let t = _mm_mul_ps(t_scaled, rcp);
-        let in_range = _mm_and_ps(_mm_cmpge_ps(t, _mm_set1_ps(t_min)), _mm_cmple_ps(t, _mm_set1_ps(t_max)));
+        let in_range =
+            _mm_and_ps(_mm_cmpge_ps(t, _mm_load_ps(r4.t_min.as_ptr())), _mm_cmple_ps(t, _mm_set1_ps(t_max)));
         mask &= _mm_movemask_ps(in_range) as u32;
         let mut out = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
         _mm_storeu_ps(out.0.as_mut_ptr(), t);
@@ -146,12 +176,8 @@ fn test4_scalar(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f
 /// Portable fallback: the scalar test per lane.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-pub(crate) fn intersect4(
-    r: &WatertightRay,
-    p: &Tri4,
-    t_min: f32,
-    t_max: f32,
-) -> Option<(f32, f32, f32, usize)> {
+pub(crate) fn intersect4(r4: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
+    let (r, t_min) = (&r4.ray, r4.t_min[0]);
     let mut best: Option<(f32, f32, f32, usize)> = None;
     let mut t_max = t_max;
     for lane in 0..4 {
@@ -167,8 +193,8 @@ pub(crate) fn intersect4(
 
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-pub(crate) fn occluded4(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> bool {
-    test4_scalar(r, p, t_min, t_max).0 != 0
+pub(crate) fn occluded4(r4: &Ray4, p: &Tri4, t_max: f32) -> bool {
+    test4_scalar(&r4.ray, p, r4.t_min[0], t_max).0 != 0
 }
 
 #[cfg(test)]
@@ -194,7 +220,8 @@ mod tests {
             let wr = WatertightRay::new(o, d);
             let (t_min, t_max) = (0.1 * rnd().abs(), 1.0 + 3.0 * rnd().abs());
             let scalar = test4_scalar(&wr, &p, t_min, t_max);
-            let (mask, t, u, v) = test4(&wr, &p, t_min, t_max);
+            let r4 = Ray4::new(wr, t_min);
+            let (mask, t, u, v) = test4(&r4, &p, t_max);
             assert_eq!(mask, scalar.0);
             for lane in 0..4 {
                 if mask & (1 << lane) != 0 {
@@ -202,7 +229,7 @@ mod tests {
                 }
             }
             hits += mask.count_ones();
-            assert_eq!(occluded4(&wr, &p, t_min, t_max), mask != 0);
+            assert_eq!(occluded4(&r4, &p, t_max), mask != 0);
         }
         assert!(hits > 2000, "{hits}");
     }

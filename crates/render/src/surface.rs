@@ -50,6 +50,12 @@ pub struct SceneGeometry {
     /// Index in `tris` of each instance's first triangle.
     first_tri: Vec<u32>,
     tris: Vec<[Vec3; 3]>,
+    /// Unit winding normal `normalize((p1 - p0) x (p2 - p0))` of every triangle (zero for
+    /// degenerate or non-finite ones) and the largest absolute coordinate of its corners
+    /// (the scale of the offset bound), so that a hit needs neither a cross product nor a
+    /// square root for them.
+    normals: Vec<Vec3>,
+    scales: Vec<f32>,
     materials: Vec<MaterialId>,
 }
 
@@ -59,6 +65,8 @@ impl SceneGeometry {
             normal_xf: Vec::with_capacity(scene.instances.len()),
             first_tri: Vec::with_capacity(scene.instances.len()),
             tris: Vec::with_capacity(scene.triangle_count()),
+            normals: Vec::with_capacity(scene.triangle_count()),
+            scales: Vec::with_capacity(scene.triangle_count()),
             materials: Vec::with_capacity(scene.triangle_count()),
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
@@ -67,7 +75,11 @@ impl SceneGeometry {
             g.first_tri.push(g.tris.len() as u32);
             let mesh = &scene.meshes[inst.mesh as usize];
             for p in 0..mesh.triangle_count() {
-                g.tris.push(mesh.triangle(p).map(|v| inst.transform.transform_point3(v)));
+                let [p0, p1, p2] = mesh.triangle(p).map(|v| inst.transform.transform_point3(v));
+                let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+                g.normals.push(if n.is_finite() { n } else { Vec3::ZERO });
+                g.scales.push(p0.abs().max(p1.abs()).max(p2.abs()).max_element());
+                g.tris.push([p0, p1, p2]);
                 g.materials.push(scene.material_of(ii as u32, p as u32));
             }
         }
@@ -78,6 +90,14 @@ impl SceneGeometry {
     #[inline]
     pub fn triangle(&self, instance: u32, prim: u32) -> &[Vec3; 3] {
         &self.tris[(self.first_tri[instance as usize] + prim) as usize]
+    }
+
+    /// Unit winding normal of triangle `prim` of instance `instance` (zero when degenerate)
+    /// and the largest absolute coordinate of its corners.
+    #[inline]
+    pub fn normal_and_scale(&self, instance: u32, prim: u32) -> (Vec3, f32) {
+        let k = (self.first_tri[instance as usize] + prim) as usize;
+        (self.normals[k], self.scales[k])
     }
 
     /// Material of triangle `prim` of instance `instance` (overrides applied).
@@ -125,13 +145,13 @@ impl SurfaceInteraction {
         // per component (a wall at x = 0 with y, z ~ 500 self-intersected with a
         // per-component bound: rays from it hit it again at t ~ 1e-5; the Cornell image was
         // 2% dark).
-        let scale = p0.abs().max(p1.abs()).max(p2.abs()).max_element();
-        let p_error = Vec3::splat(scale * (gamma(7) * OFFSET_SAFETY) + OFFSET_FLOOR);
-
-        let n_winding = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-        if n_winding == Vec3::ZERO || !n_winding.is_finite() {
+        // Per triangle, precomputed: the winding normal and max |coordinate|.
+        let (n_winding, scale) = geom.normal_and_scale(hit.instance, hit.prim);
+        if n_winding == Vec3::ZERO {
             return None;
         }
+        let p_error = Vec3::splat(scale * (gamma(7) * OFFSET_SAFETY) + OFFSET_FLOOR);
+
         let dir_len = ray.dir.length();
         let wo = -ray.dir / dir_len;
         let front_face = n_winding.dot(wo) > 0.0;

@@ -13,9 +13,11 @@
 //!    budget of `budget_spp · pixels` indirect paths, at least `min_spp` each.
 //! 3. **frame** — the pipeline's frame with those per-pixel counts; any filter.
 //!
-//! The batch system of §4.3 ([`filtrace_adaptive::BatchSchedule`]) is not used here: the
-//! pipeline traces a pixel's paths in one call of its [`PathSource`], row-parallel, and
-//! rayon's work stealing balances rows with unequal counts.
+//! The batch system of §4.3 ([`filtrace_adaptive::BatchSchedule`]) runs inside the frame:
+//! with a source that traces single paths ([`PathSource::traces_single_paths`], e.g.
+//! [`crate::RenderSource`]) the counts are scanned into sample offsets and the paths traced
+//! batch by batch, slot-parallel, then reduced per pixel (see [`crate::pipeline`]); other
+//! sources get one call per pixel with its whole count.
 
 use filtrace_adaptive::{AdaptiveError, AdaptiveParams, SampleCounts};
 use filtrace_core::{Image, Vec2};

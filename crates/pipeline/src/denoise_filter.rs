@@ -71,7 +71,11 @@ impl FilterChoice {
     /// The `filtrace-denoise` filter, or `None` for `none`. Errors name the valid choices.
     pub fn denoise_filter(&self) -> Result<Option<Filter>, String> {
         use filtrace_denoise::{AtrousParams, BilateralParams, GuidedParams};
-        fn pick<P: Copy>(filter: &str, presets: &[(&'static str, P)], want: Option<&str>) -> Result<P, String> {
+        fn pick<P: Copy>(
+            filter: &str,
+            presets: &[(&'static str, P)],
+            want: Option<&str>,
+        ) -> Result<P, String> {
             let want = want.unwrap_or(presets[0].0);
             presets.iter().find(|(n, _)| *n == want).map(|(_, p)| *p).ok_or_else(|| {
                 let names: Vec<_> = presets.iter().map(|(n, _)| *n).collect();

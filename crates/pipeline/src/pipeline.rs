@@ -3,6 +3,9 @@
 //! 1. **guide** — one guide ray per pixel through the pixel centre; at its hit: normal,
 //!    depth, albedo, direct light (one light sample) and indirect light (1..N paths, or a
 //!    per-pixel count from adaptive sampling) into the noisy indirect map (§3.1, §3.2).
+//!    A source that traces single paths gets them in batches (the sample-offset buffer,
+//!    sample-to-pixel map and per-pixel reduction of Bauszat et al.'s adaptive-sampling
+//!    paper, §4.3), with the same result as one call per pixel.
 //! 2. **filter** — the indirect map, demodulated by the albedo, is filtered with any
 //!    [`IndirectFilter`] guided by the guide rays' normal and depth (§3.3).
 //! 3. **samples** — every further eye ray of the pixel (jittered in the pixel) traces its
@@ -17,6 +20,7 @@
 
 use std::time::Instant;
 
+use filtrace_adaptive::{BatchSchedule, Slot};
 use filtrace_core::{Image, Rgb, Vec2};
 use rayon::prelude::*;
 
@@ -107,6 +111,8 @@ pub enum PipelineError {
     },
     /// The filter refused its input (bad parameters or buffers).
     Filter(String),
+    /// The batch schedule of the indirect paths could not be built.
+    Batch(String),
 }
 
 impl std::fmt::Display for PipelineError {
@@ -126,6 +132,7 @@ impl std::fmt::Display for PipelineError {
                 write!(f, "per-pixel indirect sample counts: expected {expected} entries, got {got}")
             }
             Self::Filter(e) => write!(f, "filter: {e}"),
+            Self::Batch(e) => write!(f, "batch schedule of the indirect paths: {e}"),
             Self::SourceResolution { source, frame } => write!(
                 f,
                 "the path source renders {}x{}, the frame is {}x{}",
@@ -230,6 +237,7 @@ struct SampleRecord {
 struct Buffers {
     guides: GuideGeometry,
     guide_samples: Vec<EyeSample>,
+    batch: BatchBuffers,
     samples: Vec<SampleRecord>,
     frame: Frame,
 }
@@ -242,13 +250,15 @@ pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
     source: S,
     filter: F,
     settings: PipelineSettings,
+    /// Slots per batch of indirect paths (§4.3); `None`: one per pixel, as in the paper.
+    batch_size: Option<usize>,
     buf: Buffers,
 }
 
 impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
         check(&source, &settings)?;
-        Ok(Self { source, filter, settings, buf: Buffers::default() })
+        Ok(Self { source, filter, settings, batch_size: None, buf: Buffers::default() })
     }
 
     pub fn settings(&self) -> &PipelineSettings {
@@ -260,6 +270,16 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         check(&self.source, &settings)?;
         self.settings = settings;
         Ok(())
+    }
+
+    /// Slots per batch when the guide rays' indirect paths are traced one at a time
+    /// ([`PathSource::traces_single_paths`]); `None` (the default) is the paper's
+    /// resolution-sized batch. The frame does not depend on it, only memory and overhead.
+    pub fn set_batch_size(&mut self, batch_size: Option<usize>) {
+        self.batch_size = batch_size.map(|b| b.max(1));
+    }
+    pub fn batch_size(&self) -> Option<usize> {
+        self.batch_size
     }
 
     pub fn source(&self) -> &S {
@@ -307,13 +327,18 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
         let t0 = Instant::now();
         buf.guide_samples.resize(n, EyeSample::default());
-        buf.guide_samples.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, out) in row.iter_mut().enumerate() {
-                let paths = indirect_counts.map_or(st.indirect_paths, |c| c[y * w + x]);
-                let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: st.seed };
-                *out = source.trace(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), paths);
-            }
-        });
+        if source.traces_single_paths() {
+            let counts: std::borrow::Cow<'_, [u32]> = match indirect_counts {
+                Some(c) => c.into(),
+                None => vec![st.indirect_paths; n].into(),
+            };
+            let batch = self.batch_size.unwrap_or(n).max(1);
+            let schedule = BatchSchedule::from_counts(&counts, batch)
+                .map_err(|e| PipelineError::Batch(e.to_string()))?;
+            guide_pass_batched(source, &schedule, &mut buf.batch, &mut buf.guide_samples, w, st.seed);
+        } else {
+            guide_pass_per_pixel(source, indirect_counts, &mut buf.guide_samples, w, &st);
+        }
         store_guides(&buf.guide_samples, &mut buf.guides, &mut buf.frame.images, w, h, st.demodulate_albedo);
         let guide_ms = ms(t0);
 
@@ -403,6 +428,107 @@ fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) 
     } else {
         im.filtered_direct = Image::new(0, 0, 3);
     }
+}
+
+/// Pass 1 with a source that takes a pixel's whole path count per call: one call per
+/// pixel, rows in parallel.
+fn guide_pass_per_pixel<S: PathSource>(
+    source: &S,
+    counts: Option<&[u32]>,
+    out: &mut [EyeSample],
+    w: usize,
+    st: &PipelineSettings,
+) {
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
+            let paths = counts.map_or(st.indirect_paths, |c| c[y * w + x]);
+            let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: st.seed };
+            *out = source.trace(key, guide_film(x, y), paths);
+        }
+    });
+}
+
+/// The batch buffers of §4.3: the sample-to-pixel map and one result per slot.
+#[derive(Default)]
+struct BatchBuffers {
+    slots: Vec<Slot>,
+    results: Vec<EyeSample>,
+}
+
+/// Pass 1 with a source that traces one path per call, after Bauszat et al. 2011, §4.3:
+/// the per-pixel counts are scanned into sample offsets (`schedule`); each batch fills its
+/// sample-to-pixel map, traces its slots in parallel into the per-slot buffer, then each
+/// pixel adds its own contiguous slot range in sample order (parallel over pixels, no
+/// atomics). Pixels span batches; their sums carry over in `out`. Summing from zero in
+/// path order and scaling by `1 / count` last gives what `trace(key, film, count)` gives
+/// (the [`PathSource::trace_path`] contract), bit for bit, whatever the batch size and
+/// the thread count. Pixels with no path get `trace(key, film, 0)` (first hit, direct).
+fn guide_pass_batched<S: PathSource>(
+    source: &S,
+    schedule: &BatchSchedule,
+    bb: &mut BatchBuffers,
+    out: &mut [EyeSample],
+    w: usize,
+    seed: u64,
+) {
+    let key_of = |p: usize| SampleKey { x: (p % w) as u32, y: (p / w) as u32, sample: 0, seed };
+    // Pixels without paths: first hit and direct light (as `trace(.., 0)`); the others
+    // start from zero sums.
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, e) in row.iter_mut().enumerate() {
+            let p = y * w + x;
+            *e = if schedule.count(p) == 0 {
+                source.trace(key_of(p), guide_film(x, y), 0)
+            } else {
+                EyeSample::default()
+            };
+        }
+    });
+    let size = schedule.batch_size().min(schedule.total_samples() as usize);
+    bb.slots.resize(size, Slot::default());
+    bb.results.resize(size, EyeSample::default());
+    for batch in schedule.batches() {
+        let len = batch.len();
+        batch.fill_sample_to_pixel(&mut bb.slots);
+        bb.results[..len].par_iter_mut().zip(&bb.slots[..len]).with_min_len(16).for_each(|(r, s)| {
+            let p = s.pixel as usize;
+            *r = source.trace_path(key_of(p), guide_film(p % w, p / w), s.sample);
+        });
+        // Per-pixel reduction over each pixel's own slot range.
+        let first = batch.pixels().start;
+        let (slots, results) = (&bb.slots, &bb.results);
+        out[batch.pixels()].par_iter_mut().enumerate().for_each(|(i, acc)| {
+            for k in batch.slots_of(first + i) {
+                let e = &results[k];
+                if slots[k].sample == 0 {
+                    // The first path names the hit; an escaped ray is final as it is.
+                    *acc = if e.hit.is_some() {
+                        EyeSample { direct: Rgb::ZERO, indirect: Rgb::ZERO, ..*e }
+                    } else {
+                        *e
+                    };
+                }
+                if acc.hit.is_some() {
+                    acc.direct += e.direct;
+                    acc.indirect += e.indirect;
+                }
+            }
+        });
+    }
+    // Means: scale the sums by 1 / count, after all batches.
+    out.par_iter_mut().enumerate().for_each(|(p, e)| {
+        let c = schedule.count(p);
+        if c > 0 && e.hit.is_some() {
+            let inv = 1.0 / c as f32;
+            e.direct *= inv;
+            e.indirect *= inv;
+        }
+    });
+}
+
+/// Film position of the guide ray of pixel `(x, y)`: the pixel centre.
+fn guide_film(x: usize, y: usize) -> Vec2 {
+    Vec2::new(x as f32 + 0.5, y as f32 + 0.5)
 }
 
 /// Writes the guide rays into the G-buffer and the (demodulated) indirect map.

@@ -68,7 +68,8 @@ impl PathSource for RenderSource {
                 if params.allows(2) { path::direct_light(&ctx, &si, &mut sampler) } else { Rgb::ZERO };
             return EyeSample { direct: finite_or_zero(emitted + direct), ..base };
         }
-        // The guide ray: `indirect_paths` paths from its hit, direct and indirect apart.
+        // The guide ray: `indirect_paths` paths from its hit, direct and indirect apart
+        // (`trace_path` is one term of this sum: keep them in step).
         let (mut direct, mut indirect) = (Rgb::ZERO, Rgb::ZERO);
         for k in 0..indirect_paths {
             let mut sampler = Sampler::new(key.x, key.y, k, key.seed);
@@ -81,6 +82,32 @@ impl PathSource for RenderSource {
         }
         let inv = 1.0 / indirect_paths as f32;
         EyeSample { direct: direct * inv, indirect: indirect * inv, ..base }
+    }
+
+    fn traces_single_paths(&self) -> bool {
+        true
+    }
+
+    fn trace_path(&self, key: SampleKey, film: Vec2, path_index: u32) -> EyeSample {
+        let ctx = self.renderer.context();
+        let params = self.renderer.path_params();
+        let offset = film - Vec2::new(key.x as f32, key.y as f32);
+        let ray = self.renderer.camera().generate_ray(key.x, key.y, offset);
+        let Some(si) = ctx.intersect(&ray) else {
+            let env = ctx.lights.environment_radiance(ray.dir);
+            return EyeSample { direct: finite_or_zero(env), ..Default::default() };
+        };
+        let vs = path::visible_surface(&ctx, &si);
+        let hit = Some(HitGeometry { normal: vs.normal, depth: vs.depth });
+        let base = EyeSample { hit, albedo: vs.albedo, position: vs.position, ..Default::default() };
+        // The same sampler stream as term `path_index` of `trace`'s sum.
+        let mut sampler = Sampler::new(key.x, key.y, path_index, key.seed);
+        let split = path::trace_from_hit(&ctx, &params, &si, &mut sampler);
+        if split.direct.is_finite() && split.indirect.is_finite() {
+            EyeSample { direct: split.direct, indirect: split.indirect, ..base }
+        } else {
+            base
+        }
     }
 }
 

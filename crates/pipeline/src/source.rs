@@ -37,11 +37,44 @@ pub struct EyeSample {
 }
 
 /// A path tracer seen by the pipeline. `Sync`: rows of a frame are traced in parallel.
+///
+/// Two granularities for the guide rays' indirect paths: [`trace`](PathSource::trace)
+/// takes a pixel's whole path count in one call; a source that also implements
+/// [`trace_path`](PathSource::trace_path) (and says so with
+/// [`traces_single_paths`](PathSource::traces_single_paths)) is driven one path at a time
+/// by the batch schedule of Bauszat et al. 2011, §4.3 (see [`crate::pipeline`]).
 pub trait PathSource: Sync {
     /// Traces the eye ray of `key` through film position `film` (continuous pixel
     /// coordinates, `(0, 0)` the top-left corner of the image) and estimates its indirect
     /// light with `indirect_paths` paths from the first hit (0: skip, `indirect` is zero).
     fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample;
+
+    /// Whether [`trace_path`](PathSource::trace_path) is implemented. If so the pipeline
+    /// traces the guide rays' indirect paths one per call, in batches; if not (the
+    /// default) it calls [`trace`](PathSource::trace) once per pixel with the pixel's count.
+    fn traces_single_paths(&self) -> bool {
+        false
+    }
+
+    /// One indirect path of the guide ray of `key` (`key.sample` is 0): path number
+    /// `path` of the pixel's `0..count`. Returns the first hit as [`trace`] does (`hit`,
+    /// `albedo`, `position`), and this path's contribution alone in `direct` and
+    /// `indirect` (both zero if the path is dropped as non-finite). A ray that escaped
+    /// returns what [`trace`] returns (the environment in `direct`, for every `path`).
+    ///
+    /// Contract: the mean of `direct` and `indirect` over `path in 0..n`, summed in path
+    /// order from zero and multiplied by `1 / n`, is `trace(key, film, n)` bit for bit,
+    /// so that a frame does not depend on how its paths were batched.
+    ///
+    /// The default, for sources that do not implement it, forwards to
+    /// `trace(key, film, 1)`, which is only right for `path == 0`; the pipeline never calls
+    /// it unless [`traces_single_paths`](PathSource::traces_single_paths) is true.
+    ///
+    /// [`trace`]: PathSource::trace
+    fn trace_path(&self, key: SampleKey, film: Vec2, path: u32) -> EyeSample {
+        debug_assert!(path == 0, "trace_path is not implemented by this source");
+        self.trace(key, film, 1)
+    }
 
     /// The resolution the source was built for (its camera's), if it has one; the
     /// pipeline refuses other frame sizes.
@@ -53,6 +86,12 @@ pub trait PathSource: Sync {
 impl<S: PathSource + ?Sized> PathSource for &S {
     fn trace(&self, key: SampleKey, film: Vec2, indirect_paths: u32) -> EyeSample {
         (**self).trace(key, film, indirect_paths)
+    }
+    fn traces_single_paths(&self) -> bool {
+        (**self).traces_single_paths()
+    }
+    fn trace_path(&self, key: SampleKey, film: Vec2, path: u32) -> EyeSample {
+        (**self).trace_path(key, film, path)
     }
     fn resolution(&self) -> Option<(u32, u32)> {
         (**self).resolution()

@@ -229,3 +229,64 @@ fn black_emitters_are_background_for_the_filter_but_keep_their_geometry_for_the_
     assert_eq!(f.lookup_failures, 0);
     assert!((f.images.color.rgb(3, 0).x - 1.5).abs() < 1e-5);
 }
+
+/// A source traced one path at a time that records every (pixel, path) it is asked for.
+struct PathLog {
+    w: u32,
+    log: std::sync::Mutex<Vec<Vec<u32>>>,
+    whole_pixel_calls: std::sync::atomic::AtomicU64,
+}
+
+impl PathSource for PathLog {
+    fn trace(&self, _k: SampleKey, _f: Vec2, paths: u32) -> EyeSample {
+        if paths > 0 {
+            self.whole_pixel_calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+        let hit = Some(HitGeometry { normal: Vec3::Z, depth: 1.0 });
+        EyeSample { hit, albedo: Rgb::ONE, ..Default::default() }
+    }
+    fn traces_single_paths(&self) -> bool {
+        true
+    }
+    fn trace_path(&self, key: SampleKey, film: Vec2, path: u32) -> EyeSample {
+        assert_eq!(key.sample, 0, "indirect paths belong to the guide ray");
+        assert_eq!(
+            film,
+            Vec2::new(key.x as f32 + 0.5, key.y as f32 + 0.5),
+            "guide rays go through pixel centres"
+        );
+        self.log.lock().unwrap()[(key.y * self.w + key.x) as usize].push(path);
+        let hit = Some(HitGeometry { normal: Vec3::Z, depth: 1.0 });
+        // Path k carries k: the mean over 0..n is (n - 1) / 2.
+        EyeSample { hit, albedo: Rgb::ONE, indirect: Rgb::splat(path as f32), ..Default::default() }
+    }
+}
+
+#[test]
+fn batched_guide_pass_traces_every_path_exactly_once() {
+    let (w, h) = (7u32, 5u32);
+    let n = (w * h) as usize;
+    let counts: Vec<u32> = (0..n as u32).map(|p| (p * 5 + 3) % 7).collect();
+    let st = PipelineSettings { demodulate_albedo: false, ..settings(w, h, 1) };
+    for batch in [None, Some(1), Some(4), Some(1000)] {
+        let src = PathLog {
+            w,
+            log: std::sync::Mutex::new(vec![Vec::new(); n]),
+            whole_pixel_calls: Default::default(),
+        };
+        let mut r = FilteredRenderer::new(&src, NoFilter, st.clone()).unwrap();
+        r.set_batch_size(batch);
+        let map = r.render_frame_with_counts(Some(&counts)).unwrap().images.indirect_map.clone();
+        let mut log = src.log.into_inner().unwrap();
+        for (p, paths) in log.iter_mut().enumerate() {
+            paths.sort_unstable();
+            assert_eq!(*paths, (0..counts[p]).collect::<Vec<_>>(), "batch {batch:?}, pixel {p}");
+            let want = if counts[p] == 0 { 0.0 } else { (counts[p] - 1) as f32 / 2.0 };
+            assert!(
+                (map.rgb(p % w as usize, p / w as usize).x - want).abs() < 1e-6,
+                "batch {batch:?}, pixel {p}"
+            );
+        }
+        assert_eq!(src.whole_pixel_calls.into_inner(), 0, "no pixel traced its paths in one call");
+    }
+}

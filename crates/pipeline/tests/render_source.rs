@@ -61,3 +61,100 @@ fn source_and_frame_resolution_must_agree() {
     let e = FilteredRenderer::new(&src, NoFilter, PipelineSettings::interactive(8, 8)).err().unwrap();
     assert!(matches!(e, PipelineError::SourceResolution { .. }));
 }
+
+/// The path tracer seen through `trace` only: the pipeline then calls it once per pixel
+/// with the pixel's whole path count (the per-pixel reference of the batched pass).
+struct PerPixel<'a>(&'a RenderSource);
+
+impl PathSource for PerPixel<'_> {
+    fn trace(&self, key: SampleKey, film: filtrace_core::Vec2, paths: u32) -> EyeSample {
+        self.0.trace(key, film, paths)
+    }
+    fn resolution(&self) -> Option<(u32, u32)> {
+        self.0.resolution()
+    }
+}
+
+/// Every layer of a frame, bit for bit.
+fn assert_frames_identical(a: &Frame, b: &Frame, what: &str) {
+    let (a, b) = (&a.images, &b.images);
+    let layers = [
+        ("color", &a.color, &b.color),
+        ("noisy", &a.noisy, &b.noisy),
+        ("direct", &a.direct, &b.direct),
+        ("indirect", &a.indirect, &b.indirect),
+        ("indirect_map", &a.indirect_map, &b.indirect_map),
+        ("filtered_map", &a.filtered_map, &b.filtered_map),
+        ("normal", &a.guide.normal, &b.guide.normal),
+        ("albedo", &a.guide.albedo, &b.guide.albedo),
+        ("position", &a.guide.position, &b.guide.position),
+        ("depth", &a.guide.depth, &b.guide.depth),
+    ];
+    for (name, x, y) in layers {
+        assert!(x.same_size(y), "{what}: {name} sizes differ");
+        let bits = |i: &Image| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let (bx, by) = (bits(x), bits(y));
+        if let Some(k) = bx.iter().zip(&by).position(|(p, q)| p != q) {
+            panic!("{what}: {name}[{k}] differs: {} vs {}", x.data()[k], y.data()[k]);
+        }
+    }
+}
+
+/// Uneven per-pixel counts with zeros, a deterministic hash of the pixel.
+fn uneven_counts(n: usize) -> Vec<u32> {
+    (0..n as u64).map(|p| ((p.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 59) % 6) as u32).collect()
+}
+
+#[test]
+fn batched_indirect_paths_equal_the_per_pixel_paths_bit_for_bit() {
+    // The batched guide pass (§4.3 schedule, one path per call) against the per-pixel one,
+    // on the real path tracer: uneven counts with zeros, pixels spanning batches (batch
+    // sizes 1, 7 and the resolution), a uniform frame, and a second eye sample per pixel.
+    let (w, h) = (20, 14);
+    let src = RenderSource::new(renderer(w, h, 5, 11));
+    assert!(src.traces_single_paths());
+    let st = PipelineSettings { seed: 11, spp: 2, ..PipelineSettings::paper(w, h) };
+    let counts = uneven_counts((w * h) as usize);
+    assert!(counts.contains(&0) && counts.iter().any(|&c| c >= 4));
+    let mut reference = FilteredRenderer::new(PerPixel(&src), NoFilter, st.clone()).unwrap();
+    let want = reference.render_frame_with_counts(Some(&counts)).unwrap().clone();
+    let want_uniform = {
+        let st3 = PipelineSettings { indirect_paths: 3, ..st.clone() };
+        reference.set_settings(st3).unwrap();
+        reference.render_frame().unwrap().clone()
+    };
+    assert!(want.images.indirect_map.mean()[0] > 0.0, "the test needs indirect light");
+    for batch in [None, Some(7), Some(1)] {
+        let mut p = FilteredRenderer::new(&src, NoFilter, st.clone()).unwrap();
+        p.set_batch_size(batch);
+        let got = p.render_frame_with_counts(Some(&counts)).unwrap();
+        assert_frames_identical(got, &want, &format!("counts, batch {batch:?}"));
+        p.set_settings(PipelineSettings { indirect_paths: 3, ..st.clone() }).unwrap();
+        let got = p.render_frame().unwrap();
+        assert_frames_identical(got, &want_uniform, &format!("uniform, batch {batch:?}"));
+    }
+}
+
+#[test]
+fn batched_frames_do_not_depend_on_the_thread_count() {
+    let (w, h) = (16, 12);
+    let src = RenderSource::new(renderer(w, h, 4, 5));
+    let st = PipelineSettings { seed: 5, ..PipelineSettings::interactive(w, h) };
+    let counts = uneven_counts((w * h) as usize);
+    let frame_with = |threads: usize, batch: Option<usize>| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut p = FilteredRenderer::new(&src, NoFilter, st.clone()).unwrap();
+            p.set_batch_size(batch);
+            p.render_frame_with_counts(Some(&counts)).unwrap().clone()
+        })
+    };
+    let one = frame_with(1, None);
+    for (threads, batch) in [(3, None), (4, Some(5)), (2, Some(64))] {
+        assert_frames_identical(
+            &frame_with(threads, batch),
+            &one,
+            &format!("{threads} threads, batch {batch:?}"),
+        );
+    }
+}

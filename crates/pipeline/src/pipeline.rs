@@ -457,7 +457,8 @@ struct BatchBuffers {
 
 /// Pass 1 with a source that traces one path per call, after Bauszat et al. 2011, §4.3:
 /// the per-pixel counts are scanned into sample offsets (`schedule`); each batch fills its
-/// sample-to-pixel map, traces its slots in parallel into the per-slot buffer, then each
+/// sample-to-pixel map, traces its slots in parallel (one task per pixel's slot range in
+/// the batch, which shares the pixel's first hit) into the per-slot buffer, then each
 /// pixel adds its own contiguous slot range in sample order (parallel over pixels, no
 /// atomics). Pixels span batches; their sums carry over in `out`. Summing from zero in
 /// path order and scaling by `1 / count` last gives what `trace(key, film, count)` gives
@@ -490,9 +491,21 @@ fn guide_pass_batched<S: PathSource>(
     for batch in schedule.batches() {
         let len = batch.len();
         batch.fill_sample_to_pixel(&mut bb.slots);
-        bb.results[..len].par_iter_mut().zip(&bb.slots[..len]).with_min_len(16).for_each(|(r, s)| {
-            let p = s.pixel as usize;
-            *r = source.trace_path(key_of(p), guide_film(p % w, p / w), s.sample);
+        // Trace the batch: each pixel's slot range is one parallel task, so a pixel's
+        // first hit is traced once per batch (`trace_paths`).
+        let mut rest = &mut bb.results[..len];
+        let mut tasks = Vec::with_capacity(batch.pixels().len());
+        for p in batch.pixels() {
+            let r = batch.slots_of(p);
+            let (head, tail) = rest.split_at_mut(r.len());
+            rest = tail;
+            if !r.is_empty() {
+                tasks.push((p, bb.slots[r.start].sample, head));
+            }
+        }
+        tasks.into_par_iter().for_each(|(p, first, out)| {
+            let paths = first..first + out.len() as u32;
+            source.trace_paths(key_of(p), guide_film(p % w, p / w), paths, out);
         });
         // Per-pixel reduction over each pixel's own slot range.
         let first = batch.pixels().start;

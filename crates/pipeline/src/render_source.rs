@@ -2,6 +2,8 @@
 //! the scene's acceleration structure and lights, and the integrator's
 //! `trace_from_hit` (direct and indirect apart) and `direct_light` entry points.
 
+use std::ops::Range;
+
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{Rgb, Vec2, Vec3};
 use filtrace_render::integrator::{path, SLOT_PIXEL};
@@ -89,24 +91,34 @@ impl PathSource for RenderSource {
     }
 
     fn trace_path(&self, key: SampleKey, film: Vec2, path_index: u32) -> EyeSample {
+        let mut out = [EyeSample::default()];
+        self.trace_paths(key, film, path_index..path_index + 1, &mut out);
+        out[0]
+    }
+
+    fn trace_paths(&self, key: SampleKey, film: Vec2, paths: Range<u32>, out: &mut [EyeSample]) {
+        assert_eq!(out.len(), paths.len(), "one output per path");
         let ctx = self.renderer.context();
         let params = self.renderer.path_params();
         let offset = film - Vec2::new(key.x as f32, key.y as f32);
         let ray = self.renderer.camera().generate_ray(key.x, key.y, offset);
         let Some(si) = ctx.intersect(&ray) else {
             let env = ctx.lights.environment_radiance(ray.dir);
-            return EyeSample { direct: finite_or_zero(env), ..Default::default() };
+            out.fill(EyeSample { direct: finite_or_zero(env), ..Default::default() });
+            return;
         };
         let vs = path::visible_surface(&ctx, &si);
         let hit = Some(HitGeometry { normal: vs.normal, depth: vs.depth });
         let base = EyeSample { hit, albedo: vs.albedo, position: vs.position, ..Default::default() };
-        // The same sampler stream as term `path_index` of `trace`'s sum.
-        let mut sampler = Sampler::new(key.x, key.y, path_index, key.seed);
-        let split = path::trace_from_hit(&ctx, &params, &si, &mut sampler);
-        if split.direct.is_finite() && split.indirect.is_finite() {
-            EyeSample { direct: split.direct, indirect: split.indirect, ..base }
-        } else {
-            base
+        for (o, k) in out.iter_mut().zip(paths) {
+            // The same sampler stream as term `k` of `trace`'s sum.
+            let mut sampler = Sampler::new(key.x, key.y, k, key.seed);
+            let split = path::trace_from_hit(&ctx, &params, &si, &mut sampler);
+            *o = if split.direct.is_finite() && split.indirect.is_finite() {
+                EyeSample { direct: split.direct, indirect: split.indirect, ..base }
+            } else {
+                base
+            };
         }
     }
 }

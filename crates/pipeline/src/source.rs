@@ -4,6 +4,8 @@
 //! The implementation on filtrace's own path tracer lives in [`crate::render_source`]; the
 //! tests drive the pipeline with analytic sources.
 
+use std::ops::Range;
+
 use filtrace_core::{Rgb, Vec2, Vec3};
 
 use crate::lookup::HitGeometry;
@@ -76,6 +78,17 @@ pub trait PathSource: Sync {
         self.trace(key, film, 1)
     }
 
+    /// Paths `paths` of the guide ray of `key`, path `paths.start + i` into `out[i]`
+    /// (`out.len() == paths.len()`): the slots one pixel owns in one batch. The default calls
+    /// [`trace_path`](PathSource::trace_path) for each; a source may override it to trace
+    /// the shared first hit once (same results, the contract of `trace_path`).
+    fn trace_paths(&self, key: SampleKey, film: Vec2, paths: Range<u32>, out: &mut [EyeSample]) {
+        debug_assert_eq!(out.len(), paths.len());
+        for (o, k) in out.iter_mut().zip(paths) {
+            *o = self.trace_path(key, film, k);
+        }
+    }
+
     /// The resolution the source was built for (its camera's), if it has one; the
     /// pipeline refuses other frame sizes.
     fn resolution(&self) -> Option<(u32, u32)> {
@@ -92,6 +105,9 @@ impl<S: PathSource + ?Sized> PathSource for &S {
     }
     fn trace_path(&self, key: SampleKey, film: Vec2, path: u32) -> EyeSample {
         (**self).trace_path(key, film, path)
+    }
+    fn trace_paths(&self, key: SampleKey, film: Vec2, paths: Range<u32>, out: &mut [EyeSample]) {
+        (**self).trace_paths(key, film, paths, out)
     }
     fn resolution(&self) -> Option<(u32, u32)> {
         (**self).resolution()

@@ -473,16 +473,13 @@ fn guide_pass_batched<S: PathSource>(
     seed: u64,
 ) {
     let key_of = |p: usize| SampleKey { x: (p % w) as u32, y: (p / w) as u32, sample: 0, seed };
-    // Pixels without paths: first hit and direct light (as `trace(.., 0)`); the others
-    // start from zero sums.
+    // Pixels without paths: first hit and direct light (as `trace(.., 0)`). The others are
+    // written by the batches (their first path resets the sum).
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for (x, e) in row.iter_mut().enumerate() {
-            let p = y * w + x;
-            *e = if schedule.count(p) == 0 {
-                source.trace(key_of(p), guide_film(x, y), 0)
-            } else {
-                EyeSample::default()
-            };
+            if schedule.count(y * w + x) == 0 {
+                *e = source.trace(key_of(y * w + x), guide_film(x, y), 0);
+            }
         }
     });
     let size = schedule.batch_size().min(schedule.total_samples() as usize);
@@ -507,11 +504,13 @@ fn guide_pass_batched<S: PathSource>(
             let paths = first..first + out.len() as u32;
             source.trace_paths(key_of(p), guide_film(p % w, p / w), paths, out);
         });
-        // Per-pixel reduction over each pixel's own slot range.
+        // Per-pixel reduction over each pixel's own slot range, in sample order; a pixel
+        // spanning batches carries its sum over in `out`.
         let first = batch.pixels().start;
         let (slots, results) = (&bb.slots, &bb.results);
         out[batch.pixels()].par_iter_mut().enumerate().for_each(|(i, acc)| {
-            for k in batch.slots_of(first + i) {
+            let p = first + i;
+            for k in batch.slots_of(p) {
                 let e = &results[k];
                 if slots[k].sample == 0 {
                     // The first path names the hit; an escaped ray is final as it is.
@@ -524,19 +523,17 @@ fn guide_pass_batched<S: PathSource>(
                 if acc.hit.is_some() {
                     acc.direct += e.direct;
                     acc.indirect += e.indirect;
+                    // After the pixel's last path: the mean, scaled last as `trace` does.
+                    let count = schedule.count(p);
+                    if slots[k].sample + 1 == count {
+                        let inv = 1.0 / count as f32;
+                        acc.direct *= inv;
+                        acc.indirect *= inv;
+                    }
                 }
             }
         });
     }
-    // Means: scale the sums by 1 / count, after all batches.
-    out.par_iter_mut().enumerate().for_each(|(p, e)| {
-        let c = schedule.count(p);
-        if c > 0 && e.hit.is_some() {
-            let inv = 1.0 / c as f32;
-            e.direct *= inv;
-            e.indirect *= inv;
-        }
-    });
 }
 
 /// Film position of the guide ray of pixel `(x, y)`: the pixel centre.

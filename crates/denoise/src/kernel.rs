@@ -10,7 +10,7 @@
 //! contiguous slices and the three exponentials fold into one [`exp_neg`].
 
 use crate::gbuffer::{Guides, Planes3};
-use crate::simd::{exp_neg, isa, Isa};
+use crate::simd::{exp_neg_g, isa, madd, Isa};
 use rayon::prelude::*;
 
 /// One kernel entry: offset in pixels and kernel weight `h`.
@@ -47,17 +47,20 @@ struct RowArgs<'a> {
 
 /// Accumulates one tap over a row span into `acc` (`[r, g, b, weight]`).
 #[inline(always)]
-fn tap_row<const WC: bool, const WN: bool, const WX: bool>(a: &RowArgs, acc: &mut [&mut [f32]; 4]) {
+fn tap_row<const WC: bool, const WN: bool, const WX: bool, const F: bool>(
+    a: &RowArgs,
+    acc: &mut [&mut [f32]; 4],
+) {
     if a.qv.is_some() {
-        tap_row_v::<WC, WN, WX, true>(a, acc)
+        tap_row_v::<WC, WN, WX, true, F>(a, acc)
     } else {
-        tap_row_v::<WC, WN, WX, false>(a, acc)
+        tap_row_v::<WC, WN, WX, false, F>(a, acc)
     }
 }
 
 /// [`tap_row`] with the validity check `V` compiled in or out.
 #[inline(always)]
-fn tap_row_v<const WC: bool, const WN: bool, const WX: bool, const V: bool>(
+fn tap_row_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const F: bool>(
     a: &RowArgs,
     acc: &mut [&mut [f32]; 4],
 ) {
@@ -80,15 +83,15 @@ fn tap_row_v<const WC: bool, const WN: bool, const WX: bool, const V: bool>(
         let mut e = 0.0;
         if WC {
             let (d0, d1, d2) = (pc0[i] - qc0[i], pc1[i] - qc1[i], pc2[i] - qc2[i]);
-            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[0];
+            e = madd::<F>(madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0)), a.inv[0], e);
         }
         if WN {
             let (d0, d1, d2) = (pn[0][i] - qn[0][i], pn[1][i] - qn[1][i], pn[2][i] - qn[2][i]);
-            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[1];
+            e = madd::<F>(madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0)), a.inv[1], e);
         }
         if WX {
             let (d0, d1, d2) = (px[0][i] - qx[0][i], px[1][i] - qx[1][i], px[2][i] - qx[2][i]);
-            e += (d0 * d0 + d1 * d1 + d2 * d2) * a.inv[2];
+            e = madd::<F>(madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0)), a.inv[2], e);
         }
         // Same class (surface/background) and a valid neighbour colour.
         let mut w = a.h * (1.0 - (ps[i] - qs[i]).abs());
@@ -96,11 +99,11 @@ fn tap_row_v<const WC: bool, const WN: bool, const WX: bool, const V: bool>(
             w *= qv[i];
         }
         if WC || WN || WX {
-            w *= exp_neg(e);
+            w *= exp_neg_g::<F>(e);
         }
-        a0[i] += w * qc0[i];
-        a1[i] += w * qc1[i];
-        a2[i] += w * qc2[i];
+        a0[i] = madd::<F>(w, qc0[i], a0[i]);
+        a1[i] = madd::<F>(w, qc1[i], a1[i]);
+        a2[i] = madd::<F>(w, qc2[i], a2[i]);
         aw[i] += w;
     }
 }
@@ -111,7 +114,7 @@ unsafe fn tap_row_avx2<const WC: bool, const WN: bool, const WX: bool>(
     a: &RowArgs,
     acc: &mut [&mut [f32]; 4],
 ) {
-    tap_row::<WC, WN, WX>(a, acc)
+    tap_row::<WC, WN, WX, true>(a, acc)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -120,7 +123,7 @@ unsafe fn tap_row_avx512<const WC: bool, const WN: bool, const WX: bool>(
     a: &RowArgs,
     acc: &mut [&mut [f32]; 4],
 ) {
-    tap_row::<WC, WN, WX>(a, acc)
+    tap_row::<WC, WN, WX, true>(a, acc)
 }
 
 #[inline(always)]
@@ -137,7 +140,7 @@ fn tap_row_dispatch<const WC: bool, const WN: bool, const WX: bool>(
         Isa::Base => {}
     }
     let _ = isa;
-    tap_row::<WC, WN, WX>(a, acc)
+    tap_row::<WC, WN, WX, false>(a, acc)
 }
 
 fn tap_row_any(a: &RowArgs, acc: &mut [&mut [f32]; 4], terms: (bool, bool, bool), isa: Isa) {
@@ -183,17 +186,22 @@ fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
 }
 
 #[inline(always)]
-fn dist2_acc<const B: usize>(e: &mut [f32; B], p: &[[f32; B]; 3], q: &[[f32; B]; 3], inv: f32) {
+fn dist2_acc<const B: usize, const F: bool>(
+    e: &mut [f32; B],
+    p: &[[f32; B]; 3],
+    q: &[[f32; B]; 3],
+    inv: f32,
+) {
     for i in 0..B {
         let (d0, d1, d2) = (p[0][i] - q[0][i], p[1][i] - q[1][i], p[2][i] - q[2][i]);
-        e[i] += (d0 * d0 + d1 * d1 + d2 * d2) * inv;
+        e[i] = madd::<F>(madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0)), inv, e[i]);
     }
 }
 
 /// Filters the pixels `p0 .. p0 + B * blocks` (flat indices, all interior) into `out`
 /// (`out[c][0]` is pixel `p0`).
 #[inline(always)]
-fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const B: usize>(
+fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const B: usize, const F: bool>(
     a: &BlockArgs,
     p0: usize,
     blocks: usize,
@@ -212,13 +220,13 @@ fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const
             let qc = ld3::<B>(&a.c, q);
             let mut e = [0.0f32; B];
             if WC {
-                dist2_acc(&mut e, &pc, &qc, a.inv[0]);
+                dist2_acc::<B, F>(&mut e, &pc, &qc, a.inv[0]);
             }
             if WN {
-                dist2_acc(&mut e, &pn, &ld3::<B>(&a.n, q), a.inv[1]);
+                dist2_acc::<B, F>(&mut e, &pn, &ld3::<B>(&a.n, q), a.inv[1]);
             }
             if WX {
-                dist2_acc(&mut e, &px, &ld3::<B>(&a.x, q), a.inv[2]);
+                dist2_acc::<B, F>(&mut e, &px, &ld3::<B>(&a.x, q), a.inv[2]);
             }
             let qs = ld::<B>(a.s, q);
             let qv = if V { ld::<B>(a.v.unwrap_or(a.s), q) } else { [0.0; B] };
@@ -228,11 +236,11 @@ fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const
                     w *= qv[i];
                 }
                 if WC || WN || WX {
-                    w *= exp_neg(e[i]);
+                    w *= exp_neg_g::<F>(e[i]);
                 }
-                acc[0][i] += w * qc[0][i];
-                acc[1][i] += w * qc[1][i];
-                acc[2][i] += w * qc[2][i];
+                acc[0][i] = madd::<F>(w, qc[0][i], acc[0][i]);
+                acc[1][i] = madd::<F>(w, qc[1][i], acc[1][i]);
+                acc[2][i] = madd::<F>(w, qc[2][i], acc[2][i]);
                 acc[3][i] += w;
             }
         }
@@ -253,16 +261,16 @@ fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const
 }
 
 #[inline(always)]
-fn blocks<const WC: bool, const WN: bool, const WX: bool, const B: usize>(
+fn blocks<const WC: bool, const WN: bool, const WX: bool, const B: usize, const F: bool>(
     a: &BlockArgs,
     p0: usize,
     n: usize,
     out: &mut [&mut [f32]; 3],
 ) {
     if a.v.is_some() {
-        blocks_v::<WC, WN, WX, true, B>(a, p0, n, out)
+        blocks_v::<WC, WN, WX, true, B, F>(a, p0, n, out)
     } else {
-        blocks_v::<WC, WN, WX, false, B>(a, p0, n, out)
+        blocks_v::<WC, WN, WX, false, B, F>(a, p0, n, out)
     }
 }
 
@@ -274,7 +282,7 @@ unsafe fn blocks_avx2<const WC: bool, const WN: bool, const WX: bool>(
     n: usize,
     out: &mut [&mut [f32]; 3],
 ) {
-    blocks::<WC, WN, WX, 8>(a, p0, n, out)
+    blocks::<WC, WN, WX, 8, true>(a, p0, n, out)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -285,7 +293,7 @@ unsafe fn blocks_avx512<const WC: bool, const WN: bool, const WX: bool>(
     n: usize,
     out: &mut [&mut [f32]; 3],
 ) {
-    blocks::<WC, WN, WX, 16>(a, p0, n, out)
+    blocks::<WC, WN, WX, 16, true>(a, p0, n, out)
 }
 
 /// Block width (pixels) of [`blocks_any`] for an instruction set: one vector register.
@@ -313,7 +321,7 @@ fn blocks_dispatch<const WC: bool, const WN: bool, const WX: bool>(
         Isa::Base => {}
     }
     let _ = isa;
-    blocks::<WC, WN, WX, 4>(a, p0, n, out)
+    blocks::<WC, WN, WX, 4, false>(a, p0, n, out)
 }
 
 /// `n` blocks of [`block_width`]`(isa)` pixels from flat index `p0`.

@@ -43,18 +43,36 @@ impl Tri4 {
 /// A ray prepared for [`Tri4`] tests: the watertight constants plus, computed once per ray
 /// instead of once per packet, the permuted origin and shear factors splatted to four lanes
 /// and the row offsets of the permuted axes.
-#[repr(C, align(16))]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ray4 {
     /// `org[kx], org[ky], org[kz]` in every lane.
-    o: [[f32; 4]; 3],
+    o: [F4; 3],
     /// `S_x, S_y, S_z` in every lane.
-    s: [[f32; 4]; 3],
+    s: [F4; 3],
     /// `t_min` in every lane.
-    t_min: [f32; 4],
+    t_min4: F4,
+    t_min: f32,
     /// Offsets (in floats) of the `kx, ky, kz` rows inside a corner of a [`Tri4`].
     row: [usize; 3],
     pub ray: WatertightRay,
+}
+
+/// Four lanes: an SSE register where there is one (built with vector instructions, so
+/// copies of a [`Ray4`] never read back narrower stores), else an array.
+#[cfg(target_arch = "x86_64")]
+type F4 = std::arch::x86_64::__m128;
+#[cfg(not(target_arch = "x86_64"))]
+type F4 = [f32; 4];
+
+#[inline(always)]
+fn splat(x: f32) -> F4 {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE is part of the x86_64 baseline.
+    unsafe {
+        std::arch::x86_64::_mm_set1_ps(x)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    [x; 4]
 }
 
 impl Ray4 {
@@ -62,13 +80,24 @@ impl Ray4 {
     pub fn new(ray: WatertightRay, t_min: f32) -> Self {
         let k = [ray.kx, ray.ky, ray.kz];
         Self {
-            o: k.map(|k| [ray.org[k]; 4]),
-            s: [[ray.sx; 4], [ray.sy; 4], [ray.sz; 4]],
-            t_min: [t_min; 4],
+            o: k.map(|k| splat(ray.org[k])),
+            s: [splat(ray.sx), splat(ray.sy), splat(ray.sz)],
+            t_min4: splat(t_min),
+            t_min,
             row: k.map(|k| 4 * k),
             ray,
         }
     }
+}
+
+/// Result of [`test4`]: 16-byte aligned lanes (stored by aligned vector stores, read back
+/// one float at a time, so store forwarding works) and the hit mask.
+#[repr(C, align(16))]
+struct Hits4 {
+    t: [f32; 4],
+    u: [f32; 4],
+    v: [f32; 4],
+    mask: u32,
 }
 
 /// Closest hit among the four triangles with `t` in `[t_min, t_max]`:
@@ -76,7 +105,7 @@ impl Ray4 {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) fn intersect4(r: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
-    let (mask, t, u, v) = test4(r, p, t_max);
+    let Hits4 { t, u, v, mask } = test4(r, p, t_max);
     if mask == 0 {
         return None;
     }
@@ -97,13 +126,13 @@ pub(crate) fn intersect4(r: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f3
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) fn occluded4(r: &Ray4, p: &Tri4, t_max: f32) -> bool {
-    test4(r, p, t_max).0 != 0
+    test4(r, p, t_max).mask != 0
 }
 
 /// Hit mask and per-lane `t, u, v` (valid where the mask bit is set).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4]) {
+fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> Hits4 {
     use std::arch::x86_64::*;
     // SAFETY: SSE is part of the x86_64 baseline; `Tri4` rows and the `Ray4` splats are
     // 16-byte aligned and the row offsets are `4 * k` with `k < 3`.
@@ -111,10 +140,8 @@ fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4])
         let base = p.v.as_ptr() as *const f32;
         let [rx, ry, rz] = r4.row;
         let row = |corner: usize, off: usize| _mm_load_ps(base.add(12 * corner + off));
-        let (ox, oy, oz) =
-            (_mm_load_ps(r4.o[0].as_ptr()), _mm_load_ps(r4.o[1].as_ptr()), _mm_load_ps(r4.o[2].as_ptr()));
-        let (sx, sy, sz) =
-            (_mm_load_ps(r4.s[0].as_ptr()), _mm_load_ps(r4.s[1].as_ptr()), _mm_load_ps(r4.s[2].as_ptr()));
+        let [ox, oy, oz] = r4.o;
+        let [sx, sy, sz] = r4.s;
         // Translate, shear and scale each corner (Woop et al. 2013, steps 1-2).
         let corner = |c: usize| {
             let x = _mm_sub_ps(row(c, rx), ox);
@@ -135,7 +162,8 @@ fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4])
         if _mm_movemask_ps(on_edge) != 0 {
             // Rare: a ray exactly on an edge needs the f64 recomputation; use the scalar
             // test lane by lane.
-            return test4_scalar(&r4.ray, p, r4.t_min[0], t_max);
+            let (mask, t, u, v) = test4_scalar(&r4.ray, p, r4.t_min, t_max);
+            return Hits4 { t, u, v, mask };
         }
         let neg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
         let pos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
@@ -143,20 +171,19 @@ fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4])
         let det = _mm_add_ps(_mm_add_ps(u, v), w);
         let mut mask = !(_mm_movemask_ps(_mm_or_ps(outside, _mm_cmpeq_ps(det, zero))) as u32) & 0xf;
         if mask == 0 {
-            return (0, [0.0; 4], [0.0; 4], [0.0; 4]);
+            return Hits4 { t: [0.0; 4], u: [0.0; 4], v: [0.0; 4], mask: 0 };
         }
         // Hit distance (step 4); NaN lanes (unused) fail both range tests.
         let t_scaled = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, az), _mm_mul_ps(v, bz)), _mm_mul_ps(w, cz));
         let rcp = _mm_div_ps(_mm_set1_ps(1.0), det);
         let t = _mm_mul_ps(t_scaled, rcp);
-        let in_range =
-            _mm_and_ps(_mm_cmpge_ps(t, _mm_load_ps(r4.t_min.as_ptr())), _mm_cmple_ps(t, _mm_set1_ps(t_max)));
+        let in_range = _mm_and_ps(_mm_cmpge_ps(t, r4.t_min4), _mm_cmple_ps(t, _mm_set1_ps(t_max)));
         mask &= _mm_movemask_ps(in_range) as u32;
-        let mut out = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
-        _mm_storeu_ps(out.0.as_mut_ptr(), t);
-        _mm_storeu_ps(out.1.as_mut_ptr(), _mm_mul_ps(v, rcp));
-        _mm_storeu_ps(out.2.as_mut_ptr(), _mm_mul_ps(w, rcp));
-        (mask, out.0, out.1, out.2)
+        let mut out = Hits4 { t: [0.0; 4], u: [0.0; 4], v: [0.0; 4], mask };
+        _mm_store_ps(out.t.as_mut_ptr(), t);
+        _mm_store_ps(out.u.as_mut_ptr(), _mm_mul_ps(v, rcp));
+        _mm_store_ps(out.v.as_mut_ptr(), _mm_mul_ps(w, rcp));
+        out
     }
 }
 
@@ -177,7 +204,7 @@ fn test4_scalar(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 pub(crate) fn intersect4(r4: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
-    let (r, t_min) = (&r4.ray, r4.t_min[0]);
+    let (r, t_min) = (&r4.ray, r4.t_min);
     let mut best: Option<(f32, f32, f32, usize)> = None;
     let mut t_max = t_max;
     for lane in 0..4 {
@@ -194,7 +221,7 @@ pub(crate) fn intersect4(r4: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 pub(crate) fn occluded4(r4: &Ray4, p: &Tri4, t_max: f32) -> bool {
-    test4_scalar(&r4.ray, p, r4.t_min[0], t_max).0 != 0
+    test4_scalar(&r4.ray, p, r4.t_min, t_max).0 != 0
 }
 
 #[cfg(test)]
@@ -221,7 +248,7 @@ mod tests {
             let (t_min, t_max) = (0.1 * rnd().abs(), 1.0 + 3.0 * rnd().abs());
             let scalar = test4_scalar(&wr, &p, t_min, t_max);
             let r4 = Ray4::new(wr, t_min);
-            let (mask, t, u, v) = test4(&r4, &p, t_max);
+            let Hits4 { t, u, v, mask } = test4(&r4, &p, t_max);
             assert_eq!(mask, scalar.0);
             for lane in 0..4 {
                 if mask & (1 << lane) != 0 {

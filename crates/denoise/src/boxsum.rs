@@ -91,14 +91,25 @@ fn band<const K: usize, B: BoxPass<K>>(
         // Slide the window down: add row y + r + 1, remove row y - r.
         if y + 1 < y1 {
             let (enter, leave) = (y + r + 1 < h, y >= r);
-            for (x, c) in col.iter_mut().enumerate() {
-                if enter {
+            if enter && leave {
+                // Both rows in one read-modify-write of the column sums (same rounding as
+                // adding then subtracting in two sweeps: `(c + q_in) - q_out`).
+                for (x, c) in col.iter_mut().enumerate() {
+                    let qi = pass.quantities(x, y + r + 1);
+                    let qo = pass.quantities(x, y - r);
+                    for k in 0..K {
+                        c[k] = (c[k] + qi[k]) - qo[k];
+                    }
+                }
+            } else if enter {
+                for (x, c) in col.iter_mut().enumerate() {
                     let q = pass.quantities(x, y + r + 1);
                     for k in 0..K {
                         c[k] += q[k];
                     }
                 }
-                if leave {
+            } else if leave {
+                for (x, c) in col.iter_mut().enumerate() {
                     let q = pass.quantities(x, y - r);
                     for k in 0..K {
                         c[k] -= q[k];

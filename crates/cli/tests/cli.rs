@@ -226,3 +226,19 @@ fn ctrl_c_writes_the_partial_render_and_exits_130() {
     assert!(exr.layer(&["color"]).unwrap().mean()[0] > 0.0, "partial image is black");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn bench_render_reports_the_same_image_at_every_thread_count() {
+    let out =
+        run(bin().args(["bench", "render", "--res", "24x16", "--spp", "2", "--threads", "1,2", "--json"]));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("bench render --json prints JSON");
+    let rows = v["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 2);
+    for row in rows {
+        assert_eq!(row["samples"], 24 * 16 * 2);
+        assert!(row["samples_per_s"].as_f64().unwrap() > 0.0);
+    }
+    // Deterministic sampling: the mean colour does not depend on the thread count.
+    assert_eq!(rows[0]["mean_rgb"], rows[1]["mean_rgb"]);
+}

@@ -147,12 +147,7 @@ pub fn atrous_into(
     check_color(color)?;
     params.validate()?;
     let g = Guides::new(guide, color.width(), color.height())?;
-    if params.sigma_position.is_some() && g.position.is_none() {
-        return Err(DenoiseError::MissingGuide {
-            buffer: "position (or depth)",
-            needed_by: "sigma_position",
-        });
-    }
+    g.require_position(params.sigma_position)?;
     let (mut src, valid) = to_planes(color);
     let n = color.pixel_count();
     let mut dst: Planes3 = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];

@@ -116,12 +116,7 @@ pub fn bilateral_into(
     check_color(color)?;
     params.validate()?;
     let g = Guides::new(guide, color.width(), color.height())?;
-    if params.sigma_position.is_some() && g.position.is_none() {
-        return Err(DenoiseError::MissingGuide {
-            buffer: "position (or depth)",
-            needed_by: "sigma_position",
-        });
-    }
+    g.require_position(params.sigma_position)?;
     let (src, valid) = to_planes(color);
     let src = if valid.contains(&0.0) {
         crate::atrous::inpaint_invalid(&src, &valid, color.width(), color.height())

@@ -165,6 +165,18 @@ pub(crate) struct Guides {
 }
 
 impl Guides {
+    /// Errors when a position weight (`sigma_position`) is asked for but neither a position
+    /// nor a depth buffer was given.
+    pub fn require_position(&self, sigma_position: Option<f32>) -> Result<(), DenoiseError> {
+        if sigma_position.is_some() && self.position.is_none() {
+            return Err(DenoiseError::MissingGuide {
+                buffer: "position (or depth)",
+                needed_by: "sigma_position",
+            });
+        }
+        Ok(())
+    }
+
     pub fn new(g: &GBuffer, width: usize, height: usize) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
         let n = width * height;

@@ -14,33 +14,8 @@ use filtrace_core::Vec3;
 use filtrace_scene::Mesh;
 use std::collections::HashMap;
 
-/// SplitMix64 (Steele, Lea and Flood 2014): a tiny deterministic generator for tests and
-/// benchmark ray sets.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(pub u64);
-
-impl SplitMix64 {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    }
-
-    /// Uniform direction on the unit sphere (Archimedes: z uniform, phi uniform).
-    pub fn unit_vector(&mut self) -> Vec3 {
-        let z = 1.0 - 2.0 * self.next_f32();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        let phi = 2.0 * std::f32::consts::PI * self.next_f32();
-        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-}
+/// The deterministic generator of tests and benchmark ray sets.
+pub use filtrace_core::rng::SplitMix64;
 
 fn mesh_from(name: &str, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> Mesh {
     let material_ids = vec![0; indices.len()];

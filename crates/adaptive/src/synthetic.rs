@@ -1,20 +1,8 @@
 //! Procedural G-buffers for tests and benchmarks: no scene, no renderer, just the
 //! normal and position layers a renderer would write, with a known structure.
 
+use filtrace_core::rng::SplitMix64;
 use filtrace_core::{Image, Vec3};
-
-/// Small deterministic generator (SplitMix64), so layers depend only on the seed.
-struct SplitMix(u64);
-impl SplitMix {
-    fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
 
 /// A "grass" frame of `width x height`: sky (background, zero normal) in the top
 /// quarter, a ground plane seen at a grazing angle below it, and `blades` thin
@@ -40,7 +28,7 @@ pub fn grass_gbuffer(width: usize, height: usize, blades: usize, seed: u64) -> (
             depth[y * width + x] = z;
         }
     }
-    let mut rng = SplitMix(seed);
+    let mut rng = SplitMix64(seed);
     for _ in 0..blades {
         let x0 = (rng.next_f32() * w) as usize;
         let bw = 1 + (rng.next_f32() * 3.0) as usize;

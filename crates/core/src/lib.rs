@@ -7,6 +7,7 @@
 pub mod aabb;
 pub mod image;
 pub mod ray;
+pub mod rng;
 pub mod sampler;
 pub mod sampling;
 pub mod stats;

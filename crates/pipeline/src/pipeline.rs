@@ -21,6 +21,7 @@
 use std::time::Instant;
 
 use filtrace_adaptive::{BatchSchedule, Slot};
+use filtrace_core::rng::{splitmix64, unit_f32};
 use filtrace_core::{Image, Rgb, Vec2};
 use rayon::prelude::*;
 
@@ -577,15 +578,7 @@ fn jitter(key: SampleKey) -> Vec2 {
     for v in [key.x as u64, key.y as u64, key.sample as u64] {
         h = splitmix64(h ^ v.wrapping_mul(0x9e37_79b9_7f4a_7c15));
     }
-    let to_unit = |b: u64| (b >> 40) as f32 / (1u64 << 24) as f32;
-    Vec2::new(to_unit(h), to_unit(splitmix64(h)))
-}
-
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    Vec2::new(unit_f32(h), unit_f32(splitmix64(h)))
 }
 
 /// Pass 4: for each pixel, the guide sample and every further sample get direct +

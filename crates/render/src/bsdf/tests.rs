@@ -3,27 +3,21 @@
 //! (BSDF sampling vs uniform hemisphere sampling), and the Lambertian white furnace.
 
 use super::*;
+use filtrace_core::rng::SplitMix64;
 use filtrace_core::stats::{check_pdf_integral, chi2_sphere, Chi2Params};
 use filtrace_core::Vec3;
 
 /// SplitMix64: a small, independent RNG so these tests do not depend on the renderer's
 /// sampler.
-pub(crate) struct Rng(u64);
+pub(crate) struct Rng(SplitMix64);
 
 impl Rng {
     pub(crate) fn new(seed: u64) -> Self {
-        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5851_F42D_4C95_7F2D)
-    }
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        Rng(SplitMix64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5851_F42D_4C95_7F2D))
     }
     /// Uniform in [0, 1).
     pub(crate) fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+        self.0.next_f32()
     }
     pub(crate) fn vec2(&mut self) -> Vec2 {
         Vec2::new(self.f32(), self.f32())

@@ -237,6 +237,9 @@ struct SampleRecord {
 #[derive(Default)]
 struct Buffers {
     guides: GuideGeometry,
+    /// Each guide ray's direct light (the rest of its record is in the G-buffer layers).
+    guide_direct: Vec<Rgb>,
+    /// The guide rays as traced, before they are stored (only with explicit batches).
     guide_samples: Vec<EyeSample>,
     batch: BatchBuffers,
     samples: Vec<SampleRecord>,
@@ -275,7 +278,9 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
 
     /// Slots per batch when the guide rays' indirect paths are traced one at a time
     /// ([`PathSource::traces_single_paths`]); `None` (the default) is the paper's
-    /// resolution-sized batch. The frame does not depend on it, only memory and overhead.
+    /// resolution-sized batch, traced without per-slot buffers (each pixel's slot range in
+    /// one task, stored as it is traced). The frame does not depend on it, only memory and
+    /// overhead.
     pub fn set_batch_size(&mut self, batch_size: Option<usize>) {
         self.batch_size = batch_size.map(|b| b.max(1));
     }
@@ -327,20 +332,33 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
 
         // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
         let t0 = Instant::now();
-        buf.guide_samples.resize(n, EyeSample::default());
-        if source.traces_single_paths() {
-            let counts: std::borrow::Cow<'_, [u32]> = match indirect_counts {
-                Some(c) => c.into(),
-                None => vec![st.indirect_paths; n].into(),
-            };
-            let batch = self.batch_size.unwrap_or(n).max(1);
-            let schedule = BatchSchedule::from_counts(&counts, batch)
-                .map_err(|e| PipelineError::Batch(e.to_string()))?;
-            guide_pass_batched(source, &schedule, &mut buf.batch, &mut buf.guide_samples, w, st.seed);
-        } else {
-            guide_pass_per_pixel(source, indirect_counts, &mut buf.guide_samples, w, &st);
+        let counts = match indirect_counts {
+            Some(c) => PathCounts::PerPixel(c),
+            None => PathCounts::Uniform(st.indirect_paths),
+        };
+        buf.guides.reset(w, h);
+        buf.guide_direct.resize(n, Rgb::ZERO);
+        match self.batch_size {
+            Some(batch) if source.traces_single_paths() => {
+                // Explicit batches (§4.3): trace into per-slot buffers, then store.
+                let counts: std::borrow::Cow<'_, [u32]> = match counts {
+                    PathCounts::PerPixel(c) => c.into(),
+                    PathCounts::Uniform(c) => vec![c; n].into(),
+                };
+                let schedule = BatchSchedule::from_counts(&counts, batch)
+                    .map_err(|e| PipelineError::Batch(e.to_string()))?;
+                buf.guide_samples.resize(n, EyeSample::default());
+                guide_pass_batched(source, &schedule, &mut buf.batch, &mut buf.guide_samples, w, st.seed);
+                let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
+                store_guides(&buf.guide_samples, rows, st.demodulate_albedo);
+            }
+            _ => {
+                // The whole frame as one batch: each pixel's paths in one task, stored as
+                // they are traced.
+                let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
+                guide_pass(source, counts, rows, w, st.seed, st.demodulate_albedo);
+            }
         }
-        store_guides(&buf.guide_samples, &mut buf.guides, &mut buf.frame.images, w, h, st.demodulate_albedo);
         let guide_ms = ms(t0);
 
         // 2. Filter the indirect map guided by the guide rays' normal and depth (§3.3).
@@ -431,22 +449,92 @@ fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) 
     }
 }
 
-/// Pass 1 with a source that takes a pixel's whole path count per call: one call per
-/// pixel, rows in parallel.
-fn guide_pass_per_pixel<S: PathSource>(
+/// Indirect path counts of the guide rays: one for every pixel, or one per pixel.
+#[derive(Clone, Copy)]
+enum PathCounts<'a> {
+    Uniform(u32),
+    PerPixel(&'a [u32]),
+}
+
+impl PathCounts<'_> {
+    #[inline]
+    fn of(&self, pixel: usize) -> u32 {
+        match self {
+            Self::Uniform(c) => *c,
+            Self::PerPixel(c) => c[pixel],
+        }
+    }
+}
+
+/// Paths traced per [`PathSource::trace_paths`] call in [`guide_pass`]: bounds the scratch
+/// buffer of a pixel with many paths (the sums do not depend on it).
+const GUIDE_PATH_CHUNK: u32 = 64;
+
+/// Pass 1 with the whole frame as one batch: rows in parallel, each pixel's paths traced in
+/// one task and written straight into the G-buffer layers (no per-slot buffer, no
+/// sample-to-pixel map). A source that traces single paths gets each pixel's slot range in
+/// [`PathSource::trace_paths`] calls, summed from zero in path order and scaled last, as
+/// [`guide_pass_batched`] does; the others get one [`PathSource::trace`] call per pixel.
+/// Both give what `trace(key, film, count)` gives, bit for bit (the `trace_path` contract).
+fn guide_pass<'a, S: PathSource>(
     source: &S,
-    counts: Option<&[u32]>,
-    out: &mut [EyeSample],
+    counts: PathCounts<'_>,
+    rows: impl IndexedParallelIterator<Item = GuideRow<'a>>,
     w: usize,
-    st: &PipelineSettings,
+    seed: u64,
+    demod: bool,
 ) {
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            let paths = counts.map_or(st.indirect_paths, |c| c[y * w + x]);
-            let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: st.seed };
-            *out = source.trace(key, guide_film(x, y), paths);
+    let single = source.traces_single_paths();
+    rows.enumerate().for_each(|(y, mut row)| {
+        let mut scratch = Vec::new();
+        for x in 0..w {
+            let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed };
+            let count = counts.of(y * w + x);
+            let e = if single && count > 0 {
+                guide_paths(source, key, count, &mut scratch)
+            } else {
+                source.trace(key, guide_film(x, y), count)
+            };
+            row.store(x, &e, demod);
         }
     });
+}
+
+/// The guide ray of `key` with `count > 0` indirect paths traced one path at a time
+/// ([`PathSource::trace_paths`], at most [`GUIDE_PATH_CHUNK`] per call): the first path
+/// names the hit, the paths are summed from zero in path order and scaled by `1 / count`
+/// last, as `trace` does.
+fn guide_paths<S: PathSource>(
+    source: &S,
+    key: SampleKey,
+    count: u32,
+    scratch: &mut Vec<EyeSample>,
+) -> EyeSample {
+    let film = guide_film(key.x as usize, key.y as usize);
+    let mut acc = EyeSample::default();
+    let mut first = 0;
+    while first < count {
+        let len = (count - first).min(GUIDE_PATH_CHUNK);
+        scratch.resize(len as usize, EyeSample::default());
+        source.trace_paths(key, film, first..first + len, scratch);
+        if first == 0 {
+            let e = scratch[0];
+            // An escaped ray is final as it is (the environment in `direct`).
+            if e.hit.is_none() {
+                return e;
+            }
+            acc = EyeSample { direct: Rgb::ZERO, indirect: Rgb::ZERO, ..e };
+        }
+        for e in scratch.iter() {
+            acc.direct += e.direct;
+            acc.indirect += e.indirect;
+        }
+        first += len;
+    }
+    let inv = 1.0 / count as f32;
+    acc.direct *= inv;
+    acc.indirect *= inv;
+    acc
 }
 
 /// The batch buffers of §4.3: the sample-to-pixel map and one result per slot.
@@ -542,34 +630,83 @@ fn guide_film(x: usize, y: usize) -> Vec2 {
     Vec2::new(x as f32 + 0.5, y as f32 + 0.5)
 }
 
-/// Writes the guide rays into the G-buffer and the (demodulated) indirect map.
-fn store_guides(
-    g: &[EyeSample],
-    guides: &mut GuideGeometry,
-    im: &mut FrameImages,
+/// One row of the guide layers: the G-buffer, the lookup's geometry, the guide ray's direct
+/// light and the (demodulated) indirect map.
+struct GuideRow<'a> {
+    hits: &'a mut [Option<HitGeometry>],
+    direct: &'a mut [Rgb],
+    normal: &'a mut [f32],
+    depth: &'a mut [f32],
+    albedo: &'a mut [f32],
+    position: &'a mut [f32],
+    coverage: &'a mut [f32],
+    map: &'a mut [f32],
+}
+
+/// The rows of the guide layers (already sized `w x h`), for a parallel pass.
+fn guide_rows<'a>(
+    hits: &'a mut [Option<HitGeometry>],
+    direct: &'a mut [Rgb],
+    im: &'a mut FrameImages,
     w: usize,
-    h: usize,
-    demod: bool,
-) {
-    guides.reset(w, h);
-    for (i, e) in g.iter().enumerate() {
-        let (x, y) = (i % w, i / w);
-        guides.hits[i] = e.hit;
+) -> impl IndexedParallelIterator<Item = GuideRow<'a>> {
+    let g = &mut im.guide;
+    (
+        hits.par_chunks_mut(w),
+        direct.par_chunks_mut(w),
+        g.normal.data_mut().par_chunks_mut(3 * w),
+        g.depth.data_mut().par_chunks_mut(w),
+        g.albedo.data_mut().par_chunks_mut(3 * w),
+        g.position.data_mut().par_chunks_mut(3 * w),
+        g.coverage.data_mut().par_chunks_mut(w),
+        im.indirect_map.data_mut().par_chunks_mut(3 * w),
+    )
+        .into_par_iter()
+        .map(|(hits, direct, normal, depth, albedo, position, coverage, map)| GuideRow {
+            hits,
+            direct,
+            normal,
+            depth,
+            albedo,
+            position,
+            coverage,
+            map,
+        })
+}
+
+impl GuideRow<'_> {
+    /// Writes guide ray `e` of column `x` into the G-buffer and the (demodulated) indirect map.
+    #[inline]
+    fn store(&mut self, x: usize, e: &EyeSample, demod: bool) {
+        let set = |dst: &mut [f32], c: Rgb| dst[3 * x..3 * x + 3].copy_from_slice(&c.to_array());
+        self.hits[x] = e.hit;
+        self.direct[x] = e.direct;
         let (n, d) = e.hit.map_or((Rgb::ZERO, 0.0), |h| (h.normal, h.depth));
         // A surface that reflects nothing (a pure emitter, like the Cornell light) has no
         // irradiance estimate: its map entry is 0 by construction, not a sample. Its normal
         // is zeroed in the filter's G-buffer so that filters treat it as background and do
         // not blend that 0 into coplanar neighbours (the ceiling around the light).
         let reflects = !demod || e.albedo.max_element() > 0.0;
-        im.guide.normal.set_rgb(x, y, if reflects { n } else { Rgb::ZERO });
-        im.guide.depth.pixel_mut(x, y)[0] = d;
-        im.guide.albedo.set_rgb(x, y, e.albedo);
-        im.guide.position.set_rgb(x, y, e.position);
-        im.guide.coverage.pixel_mut(x, y)[0] = if e.hit.is_some() && reflects { 1.0 } else { 0.0 };
+        set(self.normal, if reflects { n } else { Rgb::ZERO });
+        self.depth[x] = d;
+        set(self.albedo, e.albedo);
+        set(self.position, e.position);
+        self.coverage[x] = if e.hit.is_some() && reflects { 1.0 } else { 0.0 };
         let ind = if demod { e.indirect / (e.albedo + DEMODULATION_EPS) } else { e.indirect };
-        debug_assert!(ind.is_finite(), "non-finite indirect light at guide ({x}, {y}): {ind}");
-        im.indirect_map.set_rgb(x, y, ind);
+        debug_assert!(ind.is_finite(), "non-finite indirect light at guide column {x}: {ind}");
+        set(self.map, ind);
     }
+}
+
+/// Writes the guide rays traced by [`guide_pass_batched`] into the guide layers, rows in
+/// parallel.
+fn store_guides<'a>(g: &[EyeSample], rows: impl IndexedParallelIterator<Item = GuideRow<'a>>, demod: bool) {
+    let w = g.len() / rows.len().max(1);
+    rows.zip(g.par_chunks(w.max(1))).for_each(|(mut row, src)| {
+        for (x, e) in src.iter().enumerate() {
+            row.store(x, e, demod);
+        }
+    });
 }
 
 /// Jitter of further sample `key` inside its pixel, in `[0, 1)^2`: a hash of the key.
@@ -585,9 +722,9 @@ fn jitter(key: SampleKey) -> Vec2 {
 /// re-modulated indirect from the unfiltered and the filtered map; box average.
 /// Returns the number of samples whose lookup found no guide that hit.
 fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool) -> u64 {
-    let Buffers { guides, guide_samples, samples, frame, .. } = buf;
+    let Buffers { guides, guide_direct, samples, frame, .. } = buf;
     let im = &mut frame.images;
-    let (map, fmap) = (&im.indirect_map, &im.filtered_map);
+    let (map, fmap, albedo) = (&im.indirect_map, &im.filtered_map, &im.guide.albedo);
     let inv = 1.0 / (extra + 1) as f32;
     let remod = |albedo: Rgb| if demod { albedo + DEMODULATION_EPS } else { Rgb::ONE };
     let row = w * 3;
@@ -604,10 +741,9 @@ fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool
             let mut fails = 0u64;
             for x in 0..w {
                 let own = y * w + x;
-                let g = &guide_samples[own];
                 // The guide ray takes its own map entry.
-                let m = remod(g.albedo);
-                let mut d = g.direct;
+                let m = remod(map_rgb(albedo, own));
+                let mut d = guide_direct[own];
                 let mut ind = m * map_rgb(map, own);
                 let mut find = m * map_rgb(fmap, own);
                 for rec in &samples[own * extra..(own + 1) * extra] {

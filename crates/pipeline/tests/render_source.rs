@@ -158,3 +158,21 @@ fn batched_frames_do_not_depend_on_the_thread_count() {
         );
     }
 }
+
+#[test]
+fn pixels_with_more_paths_than_one_trace_paths_call_equal_the_per_pixel_paths() {
+    // The default guide pass traces a pixel's paths in calls of at most 64: a pixel with
+    // more (and one with exactly 64, 65) must still sum them in path order from zero.
+    let (w, h) = (4, 3);
+    let src = RenderSource::new(renderer(w, h, 4, 3));
+    let st = PipelineSettings { seed: 3, ..PipelineSettings::interactive(w, h) };
+    let counts: Vec<u32> = vec![0, 1, 63, 64, 65, 129, 200, 2, 64, 3, 130, 1];
+    let mut reference = FilteredRenderer::new(PerPixel(&src), NoFilter, st.clone()).unwrap();
+    let want = reference.render_frame_with_counts(Some(&counts)).unwrap().clone();
+    for batch in [None, Some(50)] {
+        let mut p = FilteredRenderer::new(&src, NoFilter, st.clone()).unwrap();
+        p.set_batch_size(batch);
+        let got = p.render_frame_with_counts(Some(&counts)).unwrap();
+        assert_frames_identical(got, &want, &format!("batch {batch:?}"));
+    }
+}

@@ -42,6 +42,8 @@
 //! assert!(accel.occluded(&Ray::segment(Vec3::ZERO, Vec3::X, 0.0, 2.0)));
 //! ```
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 pub mod bench;
 mod brute;
 pub mod sah;
@@ -58,7 +60,7 @@ use filtrace_scene::{Mesh, Scene};
 use rayon::prelude::*;
 use tri4::{Ray4, Tri4};
 use triangle::WatertightRay;
-use wide::{Node4, RayBoxes};
+use wide::{Node4, Node8, RayBoxes, WideNode};
 
 /// A ray-triangle hit: distance along the ray (in units of `|ray.dir|`), barycentrics of
 /// the hit (`p = (1-u-v) p0 + u p1 + v p2`), and which triangle of which instance.
@@ -71,10 +73,46 @@ pub struct Hit {
     pub prim: u32,
 }
 
+/// Which SIMD kernels a [`SceneAccel`] traverses with; [`Simd::best`] picks at run time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simd {
+    /// 4-wide nodes tested with SSE, 4-triangle packets (every x86-64 CPU; portable code
+    /// on other architectures).
+    Sse,
+    /// 8-wide nodes tested with AVX2, packets tested two at a time as 8 lanes (x86-64
+    /// CPUs with AVX2 and FMA; see `avx2.rs`).
+    Avx2,
+}
+
+impl Simd {
+    /// The fastest kernel this CPU runs.
+    pub fn best() -> Self {
+        if Simd::Avx2.available() {
+            Simd::Avx2
+        } else {
+            Simd::Sse
+        }
+    }
+
+    /// True when this CPU runs the kernel.
+    pub fn available(self) -> bool {
+        match self {
+            Simd::Sse => true,
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => avx2::available(),
+            #[cfg(not(target_arch = "x86_64"))]
+            Simd::Avx2 => false,
+        }
+    }
+}
+
 /// Bottom level: the wide BVH of one mesh, with its triangles copied in leaf order.
 #[derive(Clone, Debug, Default)]
 struct Blas {
+    /// Four-wide nodes ([`Simd::Sse`]); empty when `nodes8` is used.
     nodes: Vec<Node4>,
+    /// Eight-wide nodes ([`Simd::Avx2`]); empty when `nodes` is used.
+    nodes8: Vec<Node8>,
     /// Triangles in leaf order, four to a packet; a leaf is a range of packets.
     packets: Vec<Tri4>,
     /// Mesh triangle index of lane `l` of packet `p` at `4 p + l` (`u32::MAX`: unused).
@@ -86,12 +124,12 @@ struct Blas {
 }
 
 impl Blas {
-    fn build(mesh: &Mesh, params: &BuildParams) -> Self {
-        Self::build_from(mesh.triangle_count(), |i| mesh.triangle(i), params)
+    fn build(mesh: &Mesh, params: &BuildParams, simd: Simd) -> Self {
+        Self::build_from(mesh.triangle_count(), |i| mesh.triangle(i), params, simd)
     }
 
     /// Builds over triangles `tri(0) .. tri(n - 1)`; `prim_ids` then hold those indices.
-    fn build_from(n: usize, tri: impl Fn(usize) -> [Vec3; 3], params: &BuildParams) -> Self {
+    fn build_from(n: usize, tri: impl Fn(usize) -> [Vec3; 3], params: &BuildParams, simd: Simd) -> Self {
         // Triangles with non-finite corners can never be hit; leaving them out keeps the
         // boxes finite (a NaN box would poison every SAH cost above it).
         let (ids, boxes): (Vec<u32>, Vec<Aabb>) = (0..n)
@@ -104,7 +142,7 @@ impl Blas {
         let Some(root) = root else { return Self::default() };
         let mut packets = Vec::new();
         let mut prim_ids = Vec::new();
-        let nodes = wide::collapse(&root, &mut |first, count| {
+        let mut leaf = |first: u32, count: u32| {
             let start = packets.len() as u32;
             let leaf = &order[first as usize..(first + count) as usize];
             for chunk in leaf.chunks(4) {
@@ -114,13 +152,29 @@ impl Blas {
                 prim_ids.extend((0..4).map(|l| chunk.get(l).map_or(u32::MAX, |&k| ids[k as usize])));
             }
             (start, packets.len() as u32 - start)
-        });
-        Self { nodes, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds() }
+        };
+        let (nodes, nodes8) = match simd {
+            Simd::Sse => (wide::collapse(&root, &mut leaf), Vec::new()),
+            Simd::Avx2 => (Vec::new(), wide::collapse(&root, &mut leaf)),
+        };
+        Self { nodes, nodes8, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds() }
     }
 
     /// Closest hit in object space; shortens `*t_max` and returns `(t, u, v, prim)`.
+    /// `AVX2`: use the 8-wide nodes (only called on such a BVH, on an AVX2 CPU).
     #[inline(always)]
-    fn intersect(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
+    fn intersect<const AVX2: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t_min: f32,
+        t_max: &mut f32,
+    ) -> Option<(f32, f32, f32, u32)> {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `SceneAccel` builds 8-wide nodes only where AVX2 is available.
+            return unsafe { self.intersect8(o, d, t_min, t_max) };
+        }
         let rb = RayBoxes::new(o, d);
         let mut leaves = ClosestPackets {
             packets: &self.packets,
@@ -131,23 +185,57 @@ impl Blas {
         leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn intersect8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
+        let rb = avx2::RayBoxes8::new(o, d);
+        let mut leaves = avx2::ClosestPairs {
+            packets: &self.packets,
+            ray: avx2::Ray8::new(WatertightRay::new(o, d), t_min),
+            best: None,
+        };
+        avx2::traverse8::<_, true>(&self.nodes8, &rb, t_min, t_max, &mut leaves);
+        leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
+    }
+
     #[inline(always)]
-    fn occluded(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+    fn occluded<const AVX2: bool>(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: as in `intersect`.
+            return unsafe { self.occluded8(o, d, t_min, t_max) };
+        }
         let rb = RayBoxes::new(o, d);
         let mut t_max = t_max;
         let leaves = AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+        let rb = avx2::RayBoxes8::new(o, d);
+        let mut t_max = t_max;
+        let leaves =
+            avx2::AnyPairs { packets: &self.packets, ray: avx2::Ray8::new(WatertightRay::new(o, d), t_min) };
+        avx2::traverse8::<_, false>(&self.nodes8, &rb, t_min, &mut t_max, leaves)
+    }
+
     /// Expected node visits plus packet tests of a random ray through the root box.
     fn sah_cost(&self) -> f64 {
-        let Some(root) = self.nodes.first() else { return 0.0 };
-        let area = |n: &Node4, i: usize| n.child_box(i).surface_area() as f64;
+        Self::sah_cost_of(&self.nodes) + Self::sah_cost_of(&self.nodes8)
+    }
+
+    fn sah_cost_of<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
+        let Some(root) = nodes.first() else { return 0.0 };
+        let area = |n: &WideNode<W>, i: usize| n.child_box(i).surface_area() as f64;
         let root_area: f64 =
-            (0..4).map(|i| root.child_box(i)).fold(Aabb::EMPTY, Aabb::union).surface_area() as f64;
+            (0..W).map(|i| root.child_box(i)).fold(Aabb::EMPTY, Aabb::union).surface_area() as f64;
         let mut cost = 1.0;
-        for n in &self.nodes {
-            for i in 0..4 {
+        for n in nodes {
+            for i in 0..W {
                 if n.child_box(i).is_empty() {
                     continue;
                 }
@@ -158,6 +246,11 @@ impl Blas {
         cost
     }
 
+    fn leaf_count(&self) -> usize {
+        let four = self.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
+        four + self.nodes8.iter().flat_map(|n| n.count).filter(|&c| c > 0).count()
+    }
+
     fn validate(&self) -> Result<(), String> {
         let packet_box = |p: usize| {
             let pk = &self.packets[p];
@@ -165,7 +258,13 @@ impl Blas {
                 .filter(|&l| pk.used(l))
                 .fold(Aabb::EMPTY, |b, l| b.union(Aabb::from_points(pk.lane(l).map(Vec3::from_array))))
         };
-        wide::validate(&self.nodes, self.packets.len(), packet_box)?;
+        if self.nodes8.is_empty() {
+            wide::validate(&self.nodes, self.packets.len(), packet_box)?;
+        } else if self.nodes.is_empty() {
+            wide::validate(&self.nodes8, self.packets.len(), packet_box)?;
+        } else {
+            return Err("both 4-wide and 8-wide nodes".into());
+        }
         // Every stored triangle in exactly one lane, unused lanes marked as such.
         let mut ids: Vec<u32> = Vec::with_capacity(self.tri_count);
         for (i, &id) in self.prim_ids.iter().enumerate() {
@@ -309,6 +408,8 @@ pub struct SceneAccel {
     single: Option<u32>,
     triangle_count: usize,
     params: BuildParams,
+    /// Kernels of the bottom levels (the top level is always 4-wide).
+    simd: Simd,
 }
 
 /// Top-level object id of the merged identity instances.
@@ -320,9 +421,18 @@ impl SceneAccel {
         Self::build_with(scene, &BuildParams::default())
     }
 
-    /// Builds both levels with `params`. Bottom levels of different meshes are built in
-    /// parallel, and large meshes build their subtrees in parallel.
+    /// Builds both levels with `params` for the fastest kernels of this CPU
+    /// ([`Simd::best`]). Bottom levels of different meshes are built in parallel, and
+    /// large meshes build their subtrees in parallel.
     pub fn build_with(scene: &Scene, params: &BuildParams) -> Self {
+        Self::build_simd(scene, params, Simd::best())
+    }
+
+    /// Builds for the kernels `simd` (tests and benchmarks use it to run the SSE path on
+    /// an AVX2 CPU); a kernel this CPU lacks falls back to [`Simd::Sse`] (see
+    /// [`SceneAccel::simd`]).
+    pub fn build_simd(scene: &Scene, params: &BuildParams, simd: Simd) -> Self {
+        let simd = if simd.available() { simd } else { Simd::Sse };
         let mesh_of = |i: &filtrace_scene::Instance| scene.meshes.get(i.mesh as usize);
         let mut is_merged: Vec<bool> = scene
             .instances
@@ -346,6 +456,7 @@ impl SceneAccel {
                 scene.meshes[scene.instances[i as usize].mesh as usize].triangle(p as usize)
             },
             params,
+            simd,
         );
         let mut used = vec![false; scene.meshes.len()];
         for (inst, _) in scene.instances.iter().zip(&is_merged).filter(|(_, &m)| !m) {
@@ -357,7 +468,7 @@ impl SceneAccel {
             .meshes
             .par_iter()
             .zip(used.par_iter())
-            .map(|(m, &u)| if u { Blas::build(m, params) } else { Blas::default() })
+            .map(|(m, &u)| if u { Blas::build(m, params, simd) } else { Blas::default() })
             .collect();
         let mut accel = Self {
             blas,
@@ -370,6 +481,7 @@ impl SceneAccel {
             single: None,
             triangle_count: 0,
             params: params.clone(),
+            simd,
         };
         accel.build_top_level(scene);
         #[cfg(debug_assertions)]
@@ -395,7 +507,7 @@ impl SceneAccel {
                 .zip(&self.is_merged)
                 .all(|(a, &m)| !m || a.transform == Affine3A::IDENTITY);
         if !same_structure {
-            *self = Self::build_with(scene, &self.params.clone());
+            *self = Self::build_simd(scene, &self.params.clone(), self.simd);
             return;
         }
         self.build_top_level(scene);
@@ -462,17 +574,17 @@ impl SceneAccel {
     pub fn stats(&self) -> BvhStats {
         let mut st = BvhStats { top_level_nodes: self.tlas.len(), ..BvhStats::default() };
         for b in &self.blas {
-            st.nodes += b.nodes.len();
+            st.nodes += b.nodes.len() + b.nodes8.len();
             st.packets += b.packets.len();
             st.triangles += b.tri_count;
-            st.leaves += b.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
+            st.leaves += b.leaf_count();
             st.sah_cost += b.sah_cost();
         }
         let m = &self.merged;
-        st.nodes += m.nodes.len();
+        st.nodes += m.nodes.len() + m.nodes8.len();
         st.packets += m.packets.len();
         st.triangles += m.tri_count;
-        st.leaves += m.nodes.iter().flat_map(|n| n.count).filter(|&c| c > 0).count();
+        st.leaves += m.leaf_count();
         st.sah_cost += m.sah_cost();
         st
     }
@@ -482,15 +594,37 @@ impl SceneAccel {
         self.triangle_count
     }
 
+    /// The kernels this BVH was built for.
+    pub fn simd(&self) -> Simd {
+        self.simd
+    }
+
     /// Closest hit with `t` in `[ray.t_min, ray.t_max]`, or `None` (also for rays with
     /// NaN/infinite components or a zero direction).
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }
+        #[cfg(target_arch = "x86_64")]
+        if self.simd == Simd::Avx2 {
+            // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
+            return unsafe { self.intersect_avx2(ray) };
+        }
+        self.intersect_with::<false>(ray)
+    }
+
+    /// The whole closest-hit query compiled for AVX2 (both levels inlined).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn intersect_avx2(&self, ray: &Ray) -> Option<Hit> {
+        self.intersect_with::<true>(ray)
+    }
+
+    #[inline(always)]
+    fn intersect_with<const AVX2: bool>(&self, ray: &Ray) -> Option<Hit> {
         let mut t_max = ray.t_max;
         if let Some(o) = self.single {
-            return self.intersect_object(o, ray, &mut t_max);
+            return self.intersect_object::<AVX2>(o, ray, &mut t_max);
         }
         let mut best = None;
         let rb = RayBoxes::new(ray.origin, ray.dir);
@@ -502,7 +636,7 @@ impl SceneAccel {
             |first: u32, count: u32, t_max: &mut f32| {
                 for k in first..first + count {
                     let object = self.tlas_order[k as usize];
-                    if let Some(h) = self.intersect_object(object, ray, t_max) {
+                    if let Some(h) = self.intersect_object::<AVX2>(object, ray, t_max) {
                         best = Some(h);
                     }
                 }
@@ -517,8 +651,25 @@ impl SceneAccel {
         if !ray.is_valid() {
             return false;
         }
+        #[cfg(target_arch = "x86_64")]
+        if self.simd == Simd::Avx2 {
+            // SAFETY: as in `intersect`.
+            return unsafe { self.occluded_avx2(ray) };
+        }
+        self.occluded_with::<false>(ray)
+    }
+
+    /// The whole any-hit query compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn occluded_avx2(&self, ray: &Ray) -> bool {
+        self.occluded_with::<true>(ray)
+    }
+
+    #[inline(always)]
+    fn occluded_with<const AVX2: bool>(&self, ray: &Ray) -> bool {
         if let Some(o) = self.single {
-            return self.occluded_object(o, ray);
+            return self.occluded_object::<AVX2>(o, ray);
         }
         let rb = RayBoxes::new(ray.origin, ray.dir);
         let mut t_max = ray.t_max;
@@ -528,33 +679,33 @@ impl SceneAccel {
             ray.t_min,
             &mut t_max,
             |first: u32, count: u32, _: &mut f32| {
-                (first..first + count).any(|k| self.occluded_object(self.tlas_order[k as usize], ray))
+                (first..first + count).any(|k| self.occluded_object::<AVX2>(self.tlas_order[k as usize], ray))
             },
         )
     }
 
     #[inline(always)]
-    fn intersect_object(&self, object: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
+    fn intersect_object<const AVX2: bool>(&self, object: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
         if object == MERGED {
-            let (t, u, v, k) = self.merged.intersect(ray.origin, ray.dir, ray.t_min, t_max)?;
+            let (t, u, v, k) = self.merged.intersect::<AVX2>(ray.origin, ray.dir, ray.t_min, t_max)?;
             let (instance, prim) = self.merged_refs[k as usize];
             return Some(Hit { t, u, v, instance, prim });
         }
         let inst = object;
         let rec = &self.instances[inst as usize];
         let (o, d) = object_ray(&rec.world_to_object, rec.identity, ray)?;
-        let (t, u, v, prim) = self.blas[rec.mesh as usize].intersect(o, d, ray.t_min, t_max)?;
+        let (t, u, v, prim) = self.blas[rec.mesh as usize].intersect::<AVX2>(o, d, ray.t_min, t_max)?;
         Some(Hit { t, u, v, instance: inst, prim })
     }
 
     #[inline(always)]
-    fn occluded_object(&self, object: u32, ray: &Ray) -> bool {
+    fn occluded_object<const AVX2: bool>(&self, object: u32, ray: &Ray) -> bool {
         if object == MERGED {
-            return self.merged.occluded(ray.origin, ray.dir, ray.t_min, ray.t_max);
+            return self.merged.occluded::<AVX2>(ray.origin, ray.dir, ray.t_min, ray.t_max);
         }
         let rec = &self.instances[object as usize];
         object_ray(&rec.world_to_object, rec.identity, ray)
-            .is_some_and(|(o, d)| self.blas[rec.mesh as usize].occluded(o, d, ray.t_min, ray.t_max))
+            .is_some_and(|(o, d)| self.blas[rec.mesh as usize].occluded::<AVX2>(o, d, ray.t_min, ray.t_max))
     }
 
     /// Checks the BVH invariants of both levels (every primitive in exactly one leaf,

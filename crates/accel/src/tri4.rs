@@ -189,7 +189,12 @@ fn test4(r4: &Ray4, p: &Tri4, t_max: f32) -> Hits4 {
 
 /// The scalar test lane by lane (with its `f64` edge fallback).
 #[inline(never)]
-fn test4_scalar(r: &WatertightRay, p: &Tri4, t_min: f32, t_max: f32) -> (u32, [f32; 4], [f32; 4], [f32; 4]) {
+pub(crate) fn test4_scalar(
+    r: &WatertightRay,
+    p: &Tri4,
+    t_min: f32,
+    t_max: f32,
+) -> (u32, [f32; 4], [f32; 4], [f32; 4]) {
     let mut out = (0u32, [0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
     for lane in 0..4 {
         if let Some((t, u, v)) = intersect_watertight(r, &p.lane(lane), t_min, t_max) {

@@ -15,7 +15,8 @@ use crate::sah::{BuildNode, MAX_DEPTH};
 use filtrace_core::{Aabb, Vec3};
 use std::mem::MaybeUninit;
 
-/// One node of the wide BVH: 4 child boxes (SoA) and 4 child references, 128 bytes.
+/// One node of a `W`-wide BVH: `W` child boxes (SoA) and `W` child references; the
+/// 4-wide node ([`Node4`], SSE) is 128 bytes, the 8-wide one ([`Node8`], AVX2) 256.
 ///
 /// `bounds[0..3]` are the children's minimum x, y, z, `bounds[3..6]` the maxima. A child
 /// with `count[i] == 0` is the inner node `child[i]`; otherwise it is a leaf holding
@@ -23,24 +24,29 @@ use std::mem::MaybeUninit;
 /// no ray hits.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Node4 {
-    pub bounds: [[f32; 4]; 6],
-    pub child: [u32; 4],
-    pub count: [u32; 4],
+pub(crate) struct WideNode<const W: usize> {
+    pub bounds: [[f32; W]; 6],
+    pub child: [u32; W],
+    pub count: [u32; W],
 }
 
-impl Node4 {
-    const EMPTY: Node4 = Node4 {
+/// Four-wide node, tested with SSE.
+pub(crate) type Node4 = WideNode<4>;
+/// Eight-wide node, tested with AVX2 (`crate::avx2`).
+pub(crate) type Node8 = WideNode<8>;
+
+impl<const W: usize> WideNode<W> {
+    const EMPTY: Self = Self {
         bounds: [
-            [f32::INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
+            [f32::INFINITY; W],
+            [f32::INFINITY; W],
+            [f32::INFINITY; W],
+            [f32::NEG_INFINITY; W],
+            [f32::NEG_INFINITY; W],
+            [f32::NEG_INFINITY; W],
         ],
-        child: [0; 4],
-        count: [0; 4],
+        child: [0; W],
+        count: [0; W],
     };
 
     pub fn child_box(&self, i: usize) -> Aabb {
@@ -60,8 +66,11 @@ impl Node4 {
 /// node, even when the whole tree is one leaf). `leaf(first, count)` stores a binary leaf
 /// (primitives `order[first..first+count]`) and returns its wide-leaf reference
 /// `(child, count)`, `count > 0`.
-pub(crate) fn collapse(root: &BuildNode, leaf: &mut impl FnMut(u32, u32) -> (u32, u32)) -> Vec<Node4> {
-    let mut nodes = vec![Node4::EMPTY];
+pub(crate) fn collapse<const W: usize>(
+    root: &BuildNode,
+    leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
+) -> Vec<WideNode<W>> {
+    let mut nodes = vec![WideNode::EMPTY];
     fill(0, root, &mut nodes, leaf);
     nodes
 }
@@ -70,19 +79,19 @@ pub(crate) fn collapse(root: &BuildNode, leaf: &mut impl FnMut(u32, u32) -> (u32
 /// allocated next to each other, so that a node's children share pages and adjacent
 /// cache lines (this and the prefetches in `traverse` cut cache-miss stalls, which
 /// dominate incoherent rays).
-fn fill(
+fn fill<const W: usize>(
     index: usize,
     node: &BuildNode,
-    nodes: &mut Vec<Node4>,
+    nodes: &mut Vec<WideNode<W>>,
     leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
 ) {
-    let mut kids: Vec<&BuildNode> = Vec::with_capacity(4);
+    let mut kids: Vec<&BuildNode> = Vec::with_capacity(W);
     match node {
         BuildNode::Leaf { .. } => kids.push(node),
         BuildNode::Inner { children, .. } => kids.extend(children.iter()),
     }
-    // Open the largest inner child until there are four (Dammertz et al. 2008).
-    while kids.len() < 4 {
+    // Open the largest inner child until there are `W` (Dammertz et al. 2008).
+    while kids.len() < W {
         let largest = kids
             .iter()
             .enumerate()
@@ -93,12 +102,12 @@ fn fill(
         let BuildNode::Inner { children, .. } = kids.swap_remove(i) else { unreachable!() };
         kids.extend(children.iter());
     }
-    let mut inner = Vec::with_capacity(4);
+    let mut inner = Vec::with_capacity(W);
     for (slot, kid) in kids.into_iter().enumerate() {
         let (child, count) = match kid {
             BuildNode::Leaf { first, count, .. } => leaf(*first, *count),
             BuildNode::Inner { .. } => {
-                nodes.push(Node4::EMPTY);
+                nodes.push(WideNode::EMPTY);
                 inner.push((nodes.len() - 1, kid));
                 (nodes.len() as u32 - 1, 0)
             }
@@ -146,7 +155,7 @@ impl RayBoxes {
 }
 
 /// `1 + 2 gamma_3`: widening of the far slab distance (Ize 2013, sec. 3).
-const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 /// Slab test of a ray against the four child boxes: returns the hit mask (bit `i` for
 /// child `i`) and the entry distances.
@@ -223,14 +232,14 @@ pub(crate) fn prefetch(p: *const u8, lines: usize) {
 }
 
 #[derive(Clone, Copy)]
-struct Entry {
-    child: u32,
-    count: u32,
-    t: f32,
+pub(crate) struct Entry {
+    pub child: u32,
+    pub count: u32,
+    pub t: f32,
 }
 
 /// Traversal stack depth: each wide level pushes at most three entries.
-const STACK: usize = 3 * MAX_DEPTH + 4;
+pub(crate) const STACK: usize = 3 * MAX_DEPTH + 4;
 
 /// What traversal does at a leaf: test primitives `first .. first + count`, shorten
 /// `*t_max` on a hit (closest hit) or return `true` to stop (any hit).
@@ -355,8 +364,8 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
 /// Checks the invariants of a wide BVH over `prim_count` primitives whose boxes are given
 /// by `prim_box`: every primitive in exactly one leaf, every child box inside its parent's
 /// slot, every node reachable once. Used by debug builds and tests.
-pub(crate) fn validate(
-    nodes: &[Node4],
+pub(crate) fn validate<const W: usize>(
+    nodes: &[WideNode<W>],
     prim_count: usize,
     prim_box: impl Fn(usize) -> Aabb,
 ) -> Result<(), String> {
@@ -379,7 +388,7 @@ pub(crate) fn validate(
             return Err(format!("node {ni} deeper than {MAX_DEPTH}"));
         }
         let n = &nodes[ni];
-        for i in 0..4 {
+        for i in 0..W {
             let b = n.child_box(i);
             if b.is_empty() {
                 continue;

@@ -2,7 +2,7 @@
 //! preset, watertightness on closed meshes, degenerate input, instancing and updates.
 
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel};
+use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
 use std::path::PathBuf;
@@ -97,19 +97,44 @@ fn check_hit_in_range(h: &Hit, ray: &Ray) -> Result<(), String> {
     ok.then_some(()).ok_or_else(|| format!("hit out of range {h:?} for {ray:?}"))
 }
 
+/// Both kernels: the SSE path (forced, as on CPUs without AVX2) and the AVX2 path (when
+/// this CPU has it; otherwise a message says it was skipped).
+fn kernels() -> Vec<Simd> {
+    if Simd::Avx2.available() {
+        vec![Simd::Sse, Simd::Avx2]
+    } else {
+        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
+        vec![Simd::Sse]
+    }
+}
+
+/// Builds `scene` for every kernel.
+fn accels(scene: &Scene, params: &BuildParams) -> Vec<SceneAccel> {
+    kernels()
+        .into_iter()
+        .map(|simd| {
+            let a = SceneAccel::build_simd(scene, params, simd);
+            assert_eq!(a.simd(), simd);
+            a
+        })
+        .collect()
+}
+
 fn check_scene(scene: &Scene, n: usize, seed: u64) {
     let brute = BruteForce::build(scene);
-    for (name, params) in BuildParams::presets() {
-        let accel = SceneAccel::build_with(scene, &params);
-        accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
-        let rays = random_rays(scene, n, seed);
-        let mut hits = 0;
-        for ray in &rays {
-            check_ray(&accel, &brute, ray).unwrap_or_else(|e| panic!("preset {name}: {e}"));
-            hits += brute.intersect(ray).is_some() as usize;
+    for (preset, params) in BuildParams::presets() {
+        for accel in accels(scene, &params) {
+            let name = format!("{preset} {:?}", accel.simd());
+            accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+            let rays = random_rays(scene, n, seed);
+            let mut hits = 0;
+            for ray in &rays {
+                check_ray(&accel, &brute, ray).unwrap_or_else(|e| panic!("preset {name}: {e}"));
+                hits += brute.intersect(ray).is_some() as usize;
+            }
+            // The test only means something when both outcomes occur often.
+            assert!(hits > n / 10 && hits < n * 9 / 10, "{name}: {hits} of {n} rays hit");
         }
-        // The test only means something when both outcomes occur often.
-        assert!(hits > n / 10 && hits < n * 9 / 10, "{name}: {hits} of {n} rays hit");
     }
 }
 
@@ -142,22 +167,27 @@ fn bunny_matches_brute_force() {
 fn closed_meshes_are_watertight_from_inside() {
     for mesh in [testmesh::subdivided_cube(6), testmesh::icosphere(3), testmesh::displaced_sphere(9, 0.1)] {
         let scene = single(mesh.clone());
-        let accel = SceneAccel::build(&scene);
         let brute = BruteForce::build(&scene);
-        let mut targets: Vec<Vec3> = mesh.positions.clone();
-        for [a, b, c] in &mesh.indices {
-            let (a, b, c) =
-                (mesh.positions[*a as usize], mesh.positions[*b as usize], mesh.positions[*c as usize]);
-            targets.extend([0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)]);
-        }
-        let mut rng = SplitMix64(9);
-        targets.extend((0..2000).map(|_| rng.unit_vector()));
-        for origin in [Vec3::ZERO, Vec3::new(0.1, -0.2, 0.3), Vec3::new(1.0 / 3.0, 0.25, -0.125)] {
-            for &t in &targets {
-                let ray = Ray::new(origin, t - origin);
-                assert!(accel.intersect(&ray).is_some(), "{}: ray {ray:?} escaped", mesh.name);
-                assert!(accel.occluded(&ray), "{}: shadow ray {ray:?} escaped", mesh.name);
-                assert!(brute.intersect(&ray).is_some(), "{}: brute-force ray {ray:?} escaped", mesh.name);
+        for accel in accels(&scene, &BuildParams::default()) {
+            let mut targets: Vec<Vec3> = mesh.positions.clone();
+            for [a, b, c] in &mesh.indices {
+                let (a, b, c) =
+                    (mesh.positions[*a as usize], mesh.positions[*b as usize], mesh.positions[*c as usize]);
+                targets.extend([0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)]);
+            }
+            let mut rng = SplitMix64(9);
+            targets.extend((0..2000).map(|_| rng.unit_vector()));
+            for origin in [Vec3::ZERO, Vec3::new(0.1, -0.2, 0.3), Vec3::new(1.0 / 3.0, 0.25, -0.125)] {
+                for &t in &targets {
+                    let ray = Ray::new(origin, t - origin);
+                    assert!(accel.intersect(&ray).is_some(), "{}: ray {ray:?} escaped", mesh.name);
+                    assert!(accel.occluded(&ray), "{}: shadow ray {ray:?} escaped", mesh.name);
+                    assert!(
+                        brute.intersect(&ray).is_some(),
+                        "{}: brute-force ray {ray:?} escaped",
+                        mesh.name
+                    );
+                }
             }
         }
     }
@@ -166,26 +196,34 @@ fn closed_meshes_are_watertight_from_inside() {
 #[test]
 fn axis_aligned_rays_with_zero_direction_components() {
     let scene = single(testmesh::subdivided_cube(4));
-    let accel = SceneAccel::build(&scene);
-    for (o, d) in [
-        (Vec3::new(0.3, 0.2, -5.0), Vec3::Z),
-        (Vec3::new(0.3, 0.2, 5.0), -Vec3::Z),
-        (Vec3::new(-5.0, 0.5, 0.5), Vec3::X),
-        (Vec3::new(0.5, 5.0, -0.5), -Vec3::Y * 3.0),
-        // On the slab boundary itself: origin exactly in the plane x = 1 of a face.
-        (Vec3::new(1.0, 0.2, -5.0), Vec3::Z),
-        (Vec3::new(-0.0, 0.0, -5.0), Vec3::new(-0.0, 0.0, 1.0)),
-    ] {
-        let h = accel.intersect(&Ray::new(o, d)).unwrap_or_else(|| panic!("missed from {o} along {d}"));
-        let p = o + h.t * d;
-        assert!((p.abs().max_element() - 1.0).abs() < 1e-5, "hit point {p} not on the cube");
+    for accel in accels(&scene, &BuildParams::default()) {
+        for (o, d) in [
+            (Vec3::new(0.3, 0.2, -5.0), Vec3::Z),
+            (Vec3::new(0.3, 0.2, 5.0), -Vec3::Z),
+            (Vec3::new(-5.0, 0.5, 0.5), Vec3::X),
+            (Vec3::new(0.5, 5.0, -0.5), -Vec3::Y * 3.0),
+            // On the slab boundary itself: origin exactly in the plane x = 1 of a face.
+            (Vec3::new(1.0, 0.2, -5.0), Vec3::Z),
+            (Vec3::new(-0.0, 0.0, -5.0), Vec3::new(-0.0, 0.0, 1.0)),
+        ] {
+            let h = accel.intersect(&Ray::new(o, d)).unwrap_or_else(|| panic!("missed from {o} along {d}"));
+            let p = o + h.t * d;
+            assert!((p.abs().max_element() - 1.0).abs() < 1e-5, "hit point {p} not on the cube");
+        }
+        assert!(accel.intersect(&Ray::new(Vec3::new(2.0, 0.0, -5.0), Vec3::Z)).is_none());
     }
-    assert!(accel.intersect(&Ray::new(Vec3::new(2.0, 0.0, -5.0), Vec3::Z)).is_none());
 }
 
 #[test]
 fn degenerate_inputs_give_no_hit_and_no_panic() {
-    let empty = SceneAccel::build(&Scene::default());
+    for simd in kernels() {
+        degenerate_inputs_with(simd);
+    }
+}
+
+fn degenerate_inputs_with(simd: Simd) {
+    let build = |s: &Scene| SceneAccel::build_simd(s, &BuildParams::default(), simd);
+    let empty = build(&Scene::default());
     let ray = Ray::new(Vec3::ZERO, Vec3::X);
     assert!(empty.intersect(&ray).is_none() && !empty.occluded(&ray));
     assert_eq!(empty.triangle_count(), 0);
@@ -209,13 +247,13 @@ fn degenerate_inputs_give_no_hit_and_no_panic() {
         transform: Affine3A::from_translation(Vec3::X * 10.0),
         material_override: None,
     });
-    let accel = SceneAccel::build(&s);
+    let accel = build(&s);
     accel.validate().unwrap();
     let h = accel.intersect(&Ray::new(Vec3::new(10.0, 0.0, -5.0), Vec3::Z)).expect("live instance");
     assert_eq!(h.instance, 4);
 
     // Invalid rays.
-    let cube = SceneAccel::build(&single(testmesh::subdivided_cube(2)));
+    let cube = build(&single(testmesh::subdivided_cube(2)));
     for bad in [
         Ray::new(Vec3::new(f32::NAN, 0.0, -5.0), Vec3::Z),
         Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, f32::NAN, 1.0)),
@@ -232,7 +270,7 @@ fn degenerate_inputs_give_no_hit_and_no_panic() {
     // A triangle with a NaN corner is skipped, the rest of the mesh still works.
     let mut m = testmesh::subdivided_cube(2);
     m.positions[0] = Vec3::NAN;
-    let accel = SceneAccel::build(&single(m));
+    let accel = build(&single(m));
     assert!(accel.intersect(&Ray::new(Vec3::new(0.5, 0.5, -5.0), Vec3::Z)).is_some());
 }
 
@@ -327,4 +365,37 @@ fn gltf_engine_matches_brute_force() {
         hits += accel.intersect(ray).is_some() as usize;
     }
     assert!(hits > 150 && hits < 1350, "{hits}");
+}
+
+/// The built-in Cornell box (36 triangles, eight identity instances merged: the small-scene
+/// path) against brute force, on random rays and on rays aimed exactly at every vertex
+/// and edge midpoint from inside the room.
+#[test]
+fn cornell_box_matches_brute_force_at_vertices_and_edges() {
+    let scene = filtrace_scene::builtin("cornell").expect("built-in cornell");
+    check_scene(&scene, 3000, 13);
+    let brute = BruteForce::build(&scene);
+    let mut targets = Vec::new();
+    for inst in &scene.instances {
+        let mesh = &scene.meshes[inst.mesh as usize];
+        for [a, b, c] in &mesh.indices {
+            let [a, b, c] = [a, b, c].map(|&i| inst.transform.transform_point3(mesh.positions[i as usize]));
+            targets.extend([a, b, c, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)]);
+        }
+    }
+    let bounds = scene.bounds();
+    let origins = [bounds.center(), bounds.min + bounds.extent() * Vec3::new(0.3, 0.7, 0.4)];
+    for accel in accels(&scene, &BuildParams::default()) {
+        for o in origins {
+            for &t in &targets {
+                // Rays through the corner, and segments ending just before and after it.
+                let ray = Ray::new(o, t - o);
+                check_ray(&accel, &brute, &ray).unwrap_or_else(|e| panic!("{:?}: {e}", accel.simd()));
+                for t_max in [0.999, 1.001] {
+                    let seg = Ray::segment(o, t - o, 0.0, t_max);
+                    check_ray(&accel, &brute, &seg).unwrap_or_else(|e| panic!("{:?}: {e}", accel.simd()));
+                }
+            }
+        }
+    }
 }

@@ -1,0 +1,447 @@
+//! Eight-wide traversal with AVX2, chosen at run time ([`crate::Simd::Avx2`]).
+//!
+//! The same binary SAH tree as the SSE path, collapsed to 8-wide nodes
+//! ([`Node8`], Dammertz et al. 2008 with eight children; Embree's BVH8 on AVX CPUs): one
+//! 8-lane slab test (Williams et al. 2005, far distance widened by `1 + 2 gamma_3` as in
+//! Ize 2013, the operations of the SSE test in the same order) covers all eight children,
+//! so an incoherent ray visits about half as many nodes as with four-wide nodes. Leaves
+//! are ranges of the 4-triangle packets ([`Tri4`]) that the SSE path uses; two adjacent
+//! packets are tested at once as eight lanes of the watertight test (Woop et al. 2013),
+//! bit-identical to the scalar test (no fused multiply-adds: the sheared corners and edge
+//! functions round exactly as [`crate::triangle::intersect_watertight`] does).
+//!
+//! Every function here needs AVX2 and FMA; callers check [`available`] first.
+
+use crate::sah::MAX_DEPTH;
+use crate::tri4::{test4_scalar, Tri4};
+use crate::triangle::WatertightRay;
+use crate::wide::{prefetch, Entry, Leaves, Node8, FAR_SCALE};
+use filtrace_core::Vec3;
+use std::arch::x86_64::*;
+use std::mem::MaybeUninit;
+
+/// True when this CPU runs the AVX2 kernels (AVX2 and FMA).
+pub(crate) fn available() -> bool {
+    is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+}
+
+/// Per-ray constants of the 8-wide box test: origin and reciprocal direction splatted to
+/// eight lanes, and the offsets (in floats) of the near and far bound rows per axis.
+/// Zero direction components behave as in [`crate::wide::RayBoxes`].
+#[derive(Clone, Copy)]
+pub(crate) struct RayBoxes8 {
+    org: [__m256; 3],
+    inv: [__m256; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl RayBoxes8 {
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        let mut inv = [0.0f32; 3];
+        let mut near = [0; 3];
+        let mut far = [0; 3];
+        for k in 0..3 {
+            inv[k] = 1.0 / dir[k];
+            (near[k], far[k]) = if inv[k] >= 0.0 { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
+        }
+        Self {
+            org: [_mm256_set1_ps(origin.x), _mm256_set1_ps(origin.y), _mm256_set1_ps(origin.z)],
+            inv: [_mm256_set1_ps(inv[0]), _mm256_set1_ps(inv[1]), _mm256_set1_ps(inv[2])],
+            near,
+            far,
+        }
+    }
+}
+
+/// Slab test of a ray against the eight child boxes of `n`: hit mask (bit `i` for child
+/// `i`) and entry distances.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+    let b = n.bounds.as_ptr() as *const f32;
+    // SAFETY: `Node8` is 64-byte aligned and its bound rows are 32 bytes, so every row is
+    // 32-byte aligned; the row offsets are `8 * row` with `row < 6`.
+    let (nx, fx, ny, fy, nz, fz) = unsafe {
+        (
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.near[0])), r.org[0]), r.inv[0]),
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.far[0])), r.org[0]), r.inv[0]),
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.near[1])), r.org[1]), r.inv[1]),
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.far[1])), r.org[1]), r.inv[1]),
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.near[2])), r.org[2]), r.inv[2]),
+            _mm256_mul_ps(_mm256_sub_ps(_mm256_load_ps(b.add(r.far[2])), r.org[2]), r.inv[2]),
+        )
+    };
+    // As in the SSE test: `max(a, b)` returns `b` when either is NaN, so the slab distances
+    // go first and NaN lanes (origin in a slab plane, zero direction) are skipped.
+    let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
+    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(t_max))));
+    let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32;
+    (mask, t_near)
+}
+
+/// Eight 32-byte aligned floats (stored by one aligned store, read back one at a time).
+#[repr(C, align(32))]
+struct Lanes8([f32; 8]);
+
+/// Traversal stack depth: each 8-wide level pushes at most seven entries.
+const STACK8: usize = 7 * MAX_DEPTH + 8;
+
+/// Visits every leaf of the 8-wide BVH `nodes` whose box the ray `[t_min, *t_max]`
+/// touches, as [`crate::wide::traverse`] does for four-wide nodes: near-first for
+/// closest hits (`ORDERED`), in node order for any hits; returns `true` when a visit
+/// asked to stop.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
+    nodes: &[Node8],
+    r: &RayBoxes8,
+    t_min: f32,
+    t_max: &mut f32,
+    mut leaves: L,
+) -> bool {
+    if nodes.is_empty() {
+        return false;
+    }
+    let t_min8 = _mm256_set1_ps(t_min);
+    let mut stack = [MaybeUninit::<Entry>::uninit(); STACK8];
+    let mut sp = 0usize;
+    let mut cur = Entry { child: 0, count: 0, t: t_min };
+    let mut t_near = Lanes8([0.0; 8]);
+    loop {
+        if cur.count == 0 {
+            let node = &nodes[cur.child as usize];
+            let (mask, tn) = box8(node, r, t_min8, *t_max);
+            if mask != 0 {
+                // SAFETY: `Lanes8` is 32-byte aligned.
+                unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
+                let e = |i: usize| Entry { child: node.child[i], count: node.count[i], t: t_near.0[i] };
+                // Start fetching every child to be visited while the order is worked out.
+                let mut bits = mask;
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    if node.count[i] == 0 {
+                        prefetch(nodes.as_ptr().wrapping_add(node.child[i] as usize) as *const u8, 4);
+                    } else {
+                        leaves.prefetch(node.child[i]);
+                    }
+                }
+                let first = mask.trailing_zeros() as usize;
+                let rest = mask & (mask - 1);
+                if rest == 0 {
+                    cur = e(first);
+                    continue;
+                }
+                if !ORDERED {
+                    let mut bits = rest;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        stack[sp] = MaybeUninit::new(e(i));
+                        sp += 1;
+                    }
+                    cur = e(first);
+                    continue;
+                }
+                // Two hits (the most common case): push the farther, visit the nearer.
+                if rest & (rest - 1) == 0 {
+                    let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
+                    let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
+                    stack[sp] = MaybeUninit::new(far);
+                    sp += 1;
+                    cur = near;
+                    continue;
+                }
+                // Sort the (3 to 8) hit children by entry distance, farthest first.
+                let mut hits = [e(first); 8];
+                let mut k = 1;
+                let mut bits = rest;
+                while bits != 0 {
+                    let i = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let h = e(i);
+                    let mut j = k;
+                    while j > 0 && hits[j - 1].t < h.t {
+                        hits[j] = hits[j - 1];
+                        j -= 1;
+                    }
+                    hits[j] = h;
+                    k += 1;
+                }
+                debug_assert!(sp + k - 1 <= STACK8, "BVH deeper than MAX_DEPTH");
+                for h in &hits[..k - 1] {
+                    stack[sp] = MaybeUninit::new(*h);
+                    sp += 1;
+                }
+                cur = hits[k - 1];
+                continue;
+            }
+        } else if leaves.visit(cur.child, cur.count, t_max) {
+            return true;
+        }
+        // Pop the nearest pending entry that can still hold a closer hit.
+        loop {
+            if sp == 0 {
+                return false;
+            }
+            sp -= 1;
+            // SAFETY: entries below `sp` were written before `sp` was raised past them.
+            let e = unsafe { stack[sp].assume_init() };
+            if e.t <= *t_max {
+                cur = e;
+                break;
+            }
+        }
+    }
+}
+
+/// A ray prepared for the 8-lane triangle test: the watertight constants with the
+/// permuted origin and the shear factors splatted, and the row offsets of the permuted
+/// axes inside a [`Tri4`] corner (as [`crate::tri4::Ray4`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Ray8 {
+    o: [__m256; 3],
+    s: [__m256; 3],
+    t_min8: __m256,
+    t_min: f32,
+    row: [usize; 3],
+    ray: WatertightRay,
+}
+
+impl Ray8 {
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub fn new(ray: WatertightRay, t_min: f32) -> Self {
+        Self {
+            o: [
+                _mm256_set1_ps(ray.org[ray.kx]),
+                _mm256_set1_ps(ray.org[ray.ky]),
+                _mm256_set1_ps(ray.org[ray.kz]),
+            ],
+            s: [_mm256_set1_ps(ray.sx), _mm256_set1_ps(ray.sy), _mm256_set1_ps(ray.sz)],
+            t_min8: _mm256_set1_ps(t_min),
+            t_min,
+            row: [4 * ray.kx, 4 * ray.ky, 4 * ray.kz],
+            ray,
+        }
+    }
+}
+
+/// Result of [`test8`]: lanes 0-3 are packet `a`, 4-7 packet `b`.
+#[repr(C, align(32))]
+pub(crate) struct Hits8 {
+    pub t: [f32; 8],
+    pub u: [f32; 8],
+    pub v: [f32; 8],
+    pub mask: u32,
+}
+
+/// Watertight test of the eight triangles of packets `a` and `b` (pass the same packet
+/// twice and `lanes = 0x0f` for one packet): hit mask within `lanes` and per-lane
+/// `t, u, v` for `t` in `[t_min, t_max]`. Same operations, in the same order, as the SSE
+/// [`crate::tri4`] test.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hits8 {
+    let (pa, pb) = (a.v.as_ptr() as *const f32, b.v.as_ptr() as *const f32);
+    let [rx, ry, rz] = r.row;
+    // Packet `a` in the low half, `b` in the high half of each row.
+    // SAFETY: `Tri4` rows are 16-byte aligned; offsets are `12 corner + 4 k`, `k < 3`.
+    let row = |c: usize, off: usize| unsafe {
+        _mm256_insertf128_ps::<1>(
+            _mm256_castps128_ps256(_mm_load_ps(pa.add(12 * c + off))),
+            _mm_load_ps(pb.add(12 * c + off)),
+        )
+    };
+    let [ox, oy, oz] = r.o;
+    let [sx, sy, sz] = r.s;
+    // Translate, shear and scale each corner (Woop et al. 2013, steps 1-2).
+    let (a0, a1, a2) = (row(0, rx), row(0, ry), row(0, rz));
+    let (b0, b1, b2) = (row(1, rx), row(1, ry), row(1, rz));
+    let (c0, c1, c2) = (row(2, rx), row(2, ry), row(2, rz));
+    let (az, bz, cz) = (_mm256_sub_ps(a2, oz), _mm256_sub_ps(b2, oz), _mm256_sub_ps(c2, oz));
+    let ax = _mm256_sub_ps(_mm256_sub_ps(a0, ox), _mm256_mul_ps(sx, az));
+    let ay = _mm256_sub_ps(_mm256_sub_ps(a1, oy), _mm256_mul_ps(sy, az));
+    let bx = _mm256_sub_ps(_mm256_sub_ps(b0, ox), _mm256_mul_ps(sx, bz));
+    let by = _mm256_sub_ps(_mm256_sub_ps(b1, oy), _mm256_mul_ps(sy, bz));
+    let cx = _mm256_sub_ps(_mm256_sub_ps(c0, ox), _mm256_mul_ps(sx, cz));
+    let cy = _mm256_sub_ps(_mm256_sub_ps(c1, oy), _mm256_mul_ps(sy, cz));
+    let (az, bz, cz) = (_mm256_mul_ps(sz, az), _mm256_mul_ps(sz, bz), _mm256_mul_ps(sz, cz));
+    // Edge functions (step 3).
+    let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+    let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+    let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+    let zero = _mm256_setzero_ps();
+    let on_edge = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+        _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+    );
+    if _mm256_movemask_ps(on_edge) as u32 & lanes != 0 {
+        // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
+        return test8_scalar(r, a, b, lanes, t_max);
+    }
+    let neg = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(v, zero)),
+        _mm256_cmp_ps::<_CMP_LT_OQ>(w, zero),
+    );
+    let pos = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(v, zero)),
+        _mm256_cmp_ps::<_CMP_GT_OQ>(w, zero),
+    );
+    let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+    let reject = _mm256_or_ps(_mm256_and_ps(neg, pos), _mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero));
+    let mut mask = !(_mm256_movemask_ps(reject) as u32) & lanes;
+    let mut out = Hits8 { t: [0.0; 8], u: [0.0; 8], v: [0.0; 8], mask: 0 };
+    if mask == 0 {
+        return out;
+    }
+    // Hit distance (step 4); NaN lanes (unused) fail both range tests.
+    let t_scaled =
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
+    let rcp = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+    let t = _mm256_mul_ps(t_scaled, rcp);
+    let in_range = _mm256_and_ps(
+        _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min8),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
+    );
+    mask &= _mm256_movemask_ps(in_range) as u32;
+    out.mask = mask;
+    // SAFETY: `Hits8` is 32-byte aligned and its arrays are 32 bytes each.
+    unsafe {
+        _mm256_store_ps(out.t.as_mut_ptr(), t);
+        _mm256_store_ps(out.u.as_mut_ptr(), _mm256_mul_ps(v, rcp));
+        _mm256_store_ps(out.v.as_mut_ptr(), _mm256_mul_ps(w, rcp));
+    }
+    out
+}
+
+/// The scalar test on the lanes of [`test8`] (its edge fallback, and the reference of
+/// the tests).
+#[inline(never)]
+fn test8_scalar(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hits8 {
+    let mut out = Hits8 { t: [0.0; 8], u: [0.0; 8], v: [0.0; 8], mask: 0 };
+    for (half, p) in [a, b].into_iter().enumerate() {
+        let (mask, t, u, v) = test4_scalar(&r.ray, p, r.t_min, t_max);
+        out.mask |= mask << (4 * half);
+        out.t[4 * half..4 * half + 4].copy_from_slice(&t);
+        out.u[4 * half..4 * half + 4].copy_from_slice(&u);
+        out.v[4 * half..4 * half + 4].copy_from_slice(&v);
+    }
+    out.mask &= lanes;
+    out
+}
+
+/// Closest-hit leaf test over packet pairs; `best` holds `(t, u, v, 4 packet + lane)`.
+pub(crate) struct ClosestPairs<'a> {
+    pub packets: &'a [Tri4],
+    pub ray: Ray8,
+    pub best: Option<(f32, f32, f32, usize)>,
+}
+
+impl Leaves for &mut ClosestPairs<'_> {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+        let (first, end) = (first as usize, (first + count) as usize);
+        let leaf = &self.packets[first..end];
+        for (j, pair) in leaf.chunks(2).enumerate() {
+            let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
+            // SAFETY: the AVX2 traversal runs only where `available()` (see `Simd`).
+            let h = unsafe { test8(&self.ray, &pair[0], b, lanes, *t_max) };
+            if h.mask == 0 {
+                continue;
+            }
+            // Lowest t; the first such lane (the scalar order).
+            let mut best = h.mask.trailing_zeros() as usize;
+            let mut rest = h.mask & (h.mask - 1);
+            while rest != 0 {
+                let i = rest.trailing_zeros() as usize;
+                rest &= rest - 1;
+                if h.t[i] < h.t[best] {
+                    best = i;
+                }
+            }
+            *t_max = h.t[best];
+            self.best = Some((h.t[best], h.u[best], h.v[best], 4 * (first + 2 * j) + best));
+        }
+        false
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, first: u32) {
+        prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    }
+}
+
+/// Any-hit leaf test over packet pairs.
+pub(crate) struct AnyPairs<'a> {
+    pub packets: &'a [Tri4],
+    pub ray: Ray8,
+}
+
+impl Leaves for AnyPairs<'_> {
+    #[inline(always)]
+    fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
+        let leaf = &self.packets[first as usize..(first + count) as usize];
+        leaf.chunks(2).any(|pair| {
+            let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
+            // SAFETY: as in `ClosestPairs`.
+            unsafe { test8(&self.ray, &pair[0], b, lanes, *t_max) }.mask != 0
+        })
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, first: u32) {
+        prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testmesh::SplitMix64;
+    use crate::triangle::Tri;
+
+    /// Every lane of the 8-lane test equals the scalar test bit for bit, for pairs and
+    /// single packets.
+    #[test]
+    fn avx2_lanes_equal_the_scalar_test() {
+        if !available() {
+            println!("SKIPPED: no AVX2 on this CPU");
+            return;
+        }
+        let mut rng = SplitMix64(12);
+        let mut rnd = move || 2.0 * rng.next_f32() - 1.0;
+        let mut hits = 0;
+        for k in 0..20_000 {
+            let n = 1 + k % 8;
+            let tris: Vec<Tri> = (0..n).map(|_| [0, 1, 2].map(|_| [rnd(), rnd(), rnd()])).collect();
+            let a = Tri4::pack(&tris[..n.min(4)]);
+            let b = Tri4::pack(&tris[n.min(4)..]);
+            let lanes = if n > 4 { 0xff } else { 0x0f };
+            let b = if n > 4 { &b } else { &a };
+            let o = Vec3::new(rnd(), rnd(), rnd()) * 2.0;
+            let d = Vec3::from_array(tris[k % n][0]) * 0.6 - o;
+            let (t_min, t_max) = (0.1 * rnd().abs(), 1.0 + 3.0 * rnd().abs());
+            // SAFETY: checked `available()` above.
+            let (fast, slow) = unsafe {
+                let r = Ray8::new(WatertightRay::new(o, d), t_min);
+                (test8(&r, &a, b, lanes, t_max), test8_scalar(&r, &a, b, lanes, t_max))
+            };
+            assert_eq!(fast.mask, slow.mask);
+            for lane in 0..8 {
+                if fast.mask & (1 << lane) != 0 {
+                    assert_eq!(
+                        (fast.t[lane], fast.u[lane], fast.v[lane]),
+                        (slow.t[lane], slow.u[lane], slow.v[lane])
+                    );
+                }
+            }
+            hits += fast.mask.count_ones();
+        }
+        assert!(hits > 2000, "{hits}");
+    }
+}

@@ -196,8 +196,22 @@ impl Sampler {
     /// The sampler for sample `index` of pixel `(px, py)` under the user `seed`.
     #[inline]
     pub fn new(px: u32, py: u32, index: u32, seed: u64) -> Self {
+        Self::from_pixel_key(Self::pixel_key(px, py, seed), index)
+    }
+
+    /// The hash of `(pixel, seed)` that every sample of the pixel shares (five hashes):
+    /// renderers compute it once per pixel and make each sample's sampler with
+    /// [`Sampler::from_pixel_key`].
+    #[inline]
+    pub fn pixel_key(px: u32, py: u32, seed: u64) -> u32 {
         let s = hash_u32(seed as u32 ^ hash_u32((seed >> 32) as u32 ^ 0x5bd1_e995));
-        let key = hash_u32(hash_combine(hash_combine(s, hash_u32(px)), hash_u32(py ^ 0x27d4_eb2f)));
+        hash_u32(hash_combine(hash_combine(s, hash_u32(px)), hash_u32(py ^ 0x27d4_eb2f)))
+    }
+
+    /// The sampler of sample `index` of the pixel whose [`Sampler::pixel_key`] is `key`;
+    /// equal to `Sampler::new(px, py, index, seed)`.
+    #[inline]
+    pub fn from_pixel_key(key: u32, index: u32) -> Self {
         Self { key, index, index_rev: index.reverse_bits(), slot: 0 }
     }
 
@@ -339,6 +353,15 @@ mod tests {
                 }
                 assert!(strata.iter().all(|&c| c == 1), "1D k={k}");
             }
+        }
+    }
+
+    #[test]
+    fn pixel_key_gives_the_same_sampler() {
+        for (px, py, i, seed) in [(0u32, 0u32, 0u32, 0u64), (17, 4, 9, 5), (511, 3, 1 << 20, u64::MAX)] {
+            let mut a = Sampler::new(px, py, i, seed);
+            let mut b = Sampler::from_pixel_key(Sampler::pixel_key(px, py, seed), i);
+            assert_eq!((a.next_2d(), a.next_1d()), (b.next_2d(), b.next_1d()));
         }
     }
 

@@ -212,7 +212,13 @@ impl Renderer {
     /// Traces sample `index` of pixel `(x, y)`; the visible surface is recorded for sample 0.
     #[inline]
     pub fn trace_sample(&self, x: u32, y: u32, index: u32) -> integrator::CameraSample {
-        let mut sampler = self.sampler(x, y, index);
+        self.trace_sample_with(x, y, self.sampler(x, y, index))
+    }
+
+    /// [`Renderer::trace_sample`] with the pixel's sampler for the sample already made.
+    #[inline]
+    fn trace_sample_with(&self, x: u32, y: u32, mut sampler: Sampler) -> integrator::CameraSample {
+        let index = sampler.index();
         sampler.set_slot(SLOT_PIXEL);
         let jitter = sampler.next_2d();
         let ray = self.camera.sample_ray(x, y, index, jitter);
@@ -272,13 +278,18 @@ impl Renderer {
         let width = self.settings.width as usize;
         for (i, px) in pixels.iter_mut().enumerate() {
             let (x, y) = ((i % width) as u32, (y0 + i / width) as u32);
+            // The pixel's hash is shared by its samples; the sums stay in a local copy (in
+            // registers) and are stored once, in the same order of additions as before.
+            let key = Sampler::pixel_key(x, y, self.settings.seed);
+            let mut acc = *px;
             for index in first..end {
-                let s = self.trace_sample(x, y, index);
+                let s = self.trace_sample_with(x, y, Sampler::from_pixel_key(key, index));
                 if let Some(surface) = s.surface {
-                    px.surface = surface;
+                    acc.surface = surface;
                 }
-                px.add(&s.radiance.to_pixel_sample());
+                acc.add(&s.radiance.to_pixel_sample());
             }
+            *px = acc;
         }
     }
 

@@ -116,6 +116,12 @@ impl SurfaceBsdf {
         }
     }
 
+    /// True when [`SurfaceBsdf::sample`] reads its lobe-choice number `uc`.
+    #[inline]
+    pub fn has_lobe_choice(&self) -> bool {
+        matches!(self, SurfaceBsdf::Plastic(_))
+    }
+
     /// Reflectance for the albedo AOV: ρ for Diffuse and Plastic, normal-incidence
     /// Fresnel reflectance for Conductor.
     #[inline]

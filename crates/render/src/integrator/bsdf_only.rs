@@ -45,7 +45,7 @@ pub fn li(
         let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
-        let u = VertexSamples::draw(sampler, vertex);
+        let u = VertexSamples::draw(sampler, vertex, bsdf.has_lobe_choice());
         let Some(bs) = bsdf.sample(wo, u.u_bsdf, u.u_lobe) else { break };
         beta *= bs.f * (bs.wi.z.abs() / bs.pdf);
         if beta == Rgb::ZERO || !beta.is_finite() {

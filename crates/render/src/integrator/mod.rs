@@ -165,19 +165,28 @@ pub struct VertexSamples {
     pub u_light: filtrace_core::Vec2,
     pub u_bsdf: filtrace_core::Vec2,
     pub u_select: f32,
+    /// 0 when not drawn (see [`VertexSamples::draw`]).
     pub u_lobe: f32,
 }
 
 impl VertexSamples {
-    /// Draws the samples of vertex `vertex` from `sampler`.
+    /// Draws the samples of vertex `vertex` from `sampler`; `u_lobe` only when `lobe` (the
+    /// BSDF chooses between lobes, [`crate::bsdf::SurfaceBsdf::has_lobe_choice`]), else it
+    /// is 0. `u_select` is the same value either way: a 1D draw equals the `x` of the 2D
+    /// draw on the same slot, and skipping `y` saves a third of that slot's cost.
     #[inline]
-    pub fn draw(sampler: &mut filtrace_core::sampler::Sampler, vertex: u32) -> Self {
+    pub fn draw(sampler: &mut filtrace_core::sampler::Sampler, vertex: u32, lobe: bool) -> Self {
         let base = vertex_slot(vertex);
         sampler.set_slot(base + SLOT_LIGHT);
         let u_light = sampler.next_2d();
         let u_bsdf = sampler.next_2d();
-        let choices = sampler.next_2d();
-        Self { u_light, u_bsdf, u_select: choices.x, u_lobe: choices.y }
+        let (u_select, u_lobe) = if lobe {
+            let c = sampler.next_2d();
+            (c.x, c.y)
+        } else {
+            (sampler.next_1d(), 0.0)
+        };
+        Self { u_light, u_bsdf, u_select, u_lobe }
     }
 
     /// The Russian-roulette number of vertex `vertex`.

@@ -103,7 +103,7 @@ pub fn trace_from_hit(
         let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
-        let u = VertexSamples::draw(sampler, vertex);
+        let u = VertexSamples::draw(sampler, vertex, bsdf.has_lobe_choice());
 
         // Next-event estimation: one light sample, MIS-weighted against BSDF sampling. The
         // light reaches the eye over the vertices 0..=vertex, as emission found at vertex + 1
@@ -190,7 +190,7 @@ pub fn direct_light(ctx: &PathContext, si: &SurfaceInteraction, sampler: &mut Sa
     let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
     let frame = Frame::from_z(si.n_s);
     let wo = frame.to_local(si.wo);
-    let u = VertexSamples::draw(sampler, 0);
+    let u = VertexSamples::draw(sampler, 0, bsdf.has_lobe_choice());
 
     // Light sampling.
     let mut l_d = sample_one_light(ctx, si, &bsdf, &frame, wo, u.u_select, u.u_light);

@@ -37,73 +37,95 @@ pub const OFFSET_FLOOR: f32 = 1e-6;
 /// Shadow rays to a point end at `(1 - SHADOW_END_FRACTION)` of the distance.
 pub const SHADOW_END_FRACTION: f32 = 1e-4;
 
-/// World-space data the integrator reads at every hit, computed once per scene: the
-/// corners of every triangle (so a hit needs no transform; the same `transform_point3` the
-/// BVH uses, so the values are those it intersected), the material of every triangle
-/// (overrides applied), and per-instance normal transforms. On the Cornell box (identity
-/// transforms) this did not measurably change `from_hit`'s share of the profile (10.7% ->
-/// 10.5%, docs/perf-render.md); it saves three transforms per hit on instanced scenes.
+/// World-space data the integrator reads at every hit, computed once per scene: one
+/// [`TriangleRecord`] per triangle (world corners by the same `transform_point3` the BVH
+/// uses, so the values are those it intersected; winding normal; offset scale; material with
+/// overrides applied) and per instance its normal transform and whether its mesh has
+/// vertex normals or uvs. One record per triangle is one bounds check and one or two cache
+/// lines per hit, where four parallel arrays were four.
 #[derive(Clone, Debug)]
 pub struct SceneGeometry {
-    /// Inverse transpose of each instance's linear part.
-    normal_xf: Vec<Mat3A>,
-    /// Index in `tris` of each instance's first triangle.
-    first_tri: Vec<u32>,
-    tris: Vec<[Vec3; 3]>,
-    /// Unit winding normal `normalize((p1 - p0) x (p2 - p0))` of every triangle (zero for
-    /// degenerate or non-finite ones) and the largest absolute coordinate of its corners
-    /// (the scale of the offset bound), so that a hit needs neither a cross product nor a
-    /// square root for them.
-    normals: Vec<Vec3>,
-    scales: Vec<f32>,
-    materials: Vec<MaterialId>,
+    instances: Vec<InstanceRecord>,
+    tris: Vec<TriangleRecord>,
+}
+
+/// Per-instance data of [`SceneGeometry`].
+#[derive(Clone, Copy, Debug)]
+struct InstanceRecord {
+    /// Inverse transpose of the instance's linear part.
+    normal_xf: Mat3A,
+    /// Index in `tris` of the instance's first triangle.
+    first_tri: u32,
+    /// The mesh has one normal (uv) per vertex, so shading normals (uvs) are interpolated.
+    has_normals: bool,
+    has_uvs: bool,
+}
+
+/// Per-triangle data of [`SceneGeometry`].
+#[derive(Clone, Copy, Debug)]
+struct TriangleRecord {
+    /// World-space corners.
+    p: [Vec3; 3],
+    /// Unit winding normal `normalize((p1 - p0) x (p2 - p0))`, zero for degenerate or
+    /// non-finite triangles (so that a hit needs neither a cross product nor a square root).
+    n: Vec3,
+    /// Largest absolute coordinate of the corners (the scale of the offset bound).
+    scale: f32,
+    material: MaterialId,
 }
 
 impl SceneGeometry {
     pub fn new(scene: &Scene) -> Self {
         let mut g = SceneGeometry {
-            normal_xf: Vec::with_capacity(scene.instances.len()),
-            first_tri: Vec::with_capacity(scene.instances.len()),
+            instances: Vec::with_capacity(scene.instances.len()),
             tris: Vec::with_capacity(scene.triangle_count()),
-            normals: Vec::with_capacity(scene.triangle_count()),
-            scales: Vec::with_capacity(scene.triangle_count()),
-            materials: Vec::with_capacity(scene.triangle_count()),
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
             let inv = inst.transform.matrix3.inverse();
-            g.normal_xf.push(if inv.is_finite() { inv.transpose() } else { Mat3A::IDENTITY });
-            g.first_tri.push(g.tris.len() as u32);
             let mesh = &scene.meshes[inst.mesh as usize];
+            g.instances.push(InstanceRecord {
+                normal_xf: if inv.is_finite() { inv.transpose() } else { Mat3A::IDENTITY },
+                first_tri: g.tris.len() as u32,
+                has_normals: !mesh.normals.is_empty() && mesh.normals.len() == mesh.positions.len(),
+                has_uvs: !mesh.uvs.is_empty() && mesh.uvs.len() == mesh.positions.len(),
+            });
             for p in 0..mesh.triangle_count() {
                 let [p0, p1, p2] = mesh.triangle(p).map(|v| inst.transform.transform_point3(v));
                 let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-                g.normals.push(if n.is_finite() { n } else { Vec3::ZERO });
-                g.scales.push(p0.abs().max(p1.abs()).max(p2.abs()).max_element());
-                g.tris.push([p0, p1, p2]);
-                g.materials.push(scene.material_of(ii as u32, p as u32));
+                g.tris.push(TriangleRecord {
+                    p: [p0, p1, p2],
+                    n: if n.is_finite() { n } else { Vec3::ZERO },
+                    scale: p0.abs().max(p1.abs()).max(p2.abs()).max_element(),
+                    material: scene.material_of(ii as u32, p as u32),
+                });
             }
         }
         g
     }
 
+    #[inline]
+    fn record(&self, instance: u32, prim: u32) -> &TriangleRecord {
+        &self.tris[(self.instances[instance as usize].first_tri + prim) as usize]
+    }
+
     /// World-space corners of triangle `prim` of instance `instance`.
     #[inline]
     pub fn triangle(&self, instance: u32, prim: u32) -> &[Vec3; 3] {
-        &self.tris[(self.first_tri[instance as usize] + prim) as usize]
+        &self.record(instance, prim).p
     }
 
     /// Unit winding normal of triangle `prim` of instance `instance` (zero when degenerate)
     /// and the largest absolute coordinate of its corners.
     #[inline]
     pub fn normal_and_scale(&self, instance: u32, prim: u32) -> (Vec3, f32) {
-        let k = (self.first_tri[instance as usize] + prim) as usize;
-        (self.normals[k], self.scales[k])
+        let r = self.record(instance, prim);
+        (r.n, r.scale)
     }
 
     /// Material of triangle `prim` of instance `instance` (overrides applied).
     #[inline]
     pub fn material(&self, instance: u32, prim: u32) -> MaterialId {
-        self.materials[(self.first_tri[instance as usize] + prim) as usize]
+        self.record(instance, prim).material
     }
 }
 
@@ -135,8 +157,11 @@ pub struct SurfaceInteraction {
 impl SurfaceInteraction {
     /// The surface at `hit` of `ray` (`ray.dir` need not be unit; `t` is rescaled to a
     /// distance). Returns `None` for hits on degenerate triangles (zero normal).
+    #[inline]
     pub fn from_hit(scene: &Scene, geom: &SceneGeometry, ray: &Ray, hit: &Hit) -> Option<Self> {
-        let &[p0, p1, p2] = geom.triangle(hit.instance, hit.prim);
+        let inst = &geom.instances[hit.instance as usize];
+        let tri = &geom.tris[(inst.first_tri + hit.prim) as usize];
+        let [p0, p1, p2] = tri.p;
         let (b1, b2) = (hit.u, hit.v);
         let b0 = 1.0 - b1 - b2;
         let p = b0 * p0 + b1 * p1 + b2 * p2;
@@ -146,42 +171,37 @@ impl SurfaceInteraction {
         // per-component bound: rays from it hit it again at t ~ 1e-5; the Cornell image was
         // 2% dark).
         // Per triangle, precomputed: the winding normal and max |coordinate|.
-        let (n_winding, scale) = geom.normal_and_scale(hit.instance, hit.prim);
+        let n_winding = tri.n;
         if n_winding == Vec3::ZERO {
             return None;
         }
-        let p_error = Vec3::splat(scale * (gamma(7) * OFFSET_SAFETY) + OFFSET_FLOOR);
+        let p_error = Vec3::splat(tri.scale * (gamma(7) * OFFSET_SAFETY) + OFFSET_FLOOR);
 
         let dir_len = ray.dir.length();
-        let wo = -ray.dir / dir_len;
+        let wo = ray.dir * (-1.0 / dir_len);
         let front_face = n_winding.dot(wo) > 0.0;
 
-        // Vertex attributes (shading normals, uvs) come from the mesh.
-        let mesh = &scene.meshes[scene.instances[hit.instance as usize].mesh as usize];
-        let has_normals = !mesh.normals.is_empty() && mesh.normals.len() == mesh.positions.len();
-        let has_uvs = !mesh.uvs.is_empty() && mesh.uvs.len() == mesh.positions.len();
-        let [i0, i1, i2] =
-            if has_normals || has_uvs { mesh.indices[hit.prim as usize].map(|i| i as usize) } else { [0; 3] };
-        let mut n_s = if has_normals {
-            let n = b0 * mesh.normals[i0] + b1 * mesh.normals[i1] + b2 * mesh.normals[i2];
-            let n = (geom.normal_xf[hit.instance as usize] * n).normalize_or_zero();
-            if n.is_finite() && n != Vec3::ZERO {
-                n
-            } else {
-                n_winding
+        // Vertex attributes (shading normals, uvs) come from the mesh, when it has them.
+        let mut n_s = n_winding;
+        let mut uv = Vec2::new(b1, b2);
+        if inst.has_normals || inst.has_uvs {
+            let mesh = &scene.meshes[scene.instances[hit.instance as usize].mesh as usize];
+            let [i0, i1, i2] = mesh.indices[hit.prim as usize].map(|i| i as usize);
+            if inst.has_normals {
+                let n = b0 * mesh.normals[i0] + b1 * mesh.normals[i1] + b2 * mesh.normals[i2];
+                let n = (inst.normal_xf * n).normalize_or_zero();
+                if n.is_finite() && n != Vec3::ZERO {
+                    n_s = n;
+                }
             }
-        } else {
-            n_winding
-        };
+            if inst.has_uvs {
+                uv = b0 * mesh.uvs[i0] + b1 * mesh.uvs[i1] + b2 * mesh.uvs[i2];
+            }
+        }
         // The shading normal lives in the geometric normal's hemisphere.
         if n_s.dot(n_winding) < 0.0 {
             n_s = -n_s;
         }
-        let uv = if has_uvs {
-            b0 * mesh.uvs[i0] + b1 * mesh.uvs[i1] + b2 * mesh.uvs[i2]
-        } else {
-            Vec2::new(b1, b2)
-        };
         let mut si = SurfaceInteraction {
             p,
             p_error,
@@ -191,7 +211,7 @@ impl SurfaceInteraction {
             front_face,
             wo,
             uv,
-            material: geom.material(hit.instance, hit.prim),
+            material: tri.material,
             instance: hit.instance,
             prim: hit.prim,
             t: hit.t * dir_len,

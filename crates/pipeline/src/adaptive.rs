@@ -7,17 +7,19 @@
 //!
 //! 1. **G-buffer pre-pass** — the guide rays' first hits (normal, world position) are
 //!    traced with no indirect path: the same eye rays as the guide pass, so the importance
-//!    map sees exactly the geometry the filter will see. Costs one primary ray and one light
-//!    sample per pixel.
+//!    map sees exactly the geometry the filter will see. Costs one primary ray per pixel
+//!    ([`PathSource::first_hit`]).
 //! 2. **importance + apportionment** — [`filtrace_adaptive::plan_frame`] (§4.1, §4.2): a
 //!    budget of `budget_spp · pixels` indirect paths, at least `min_spp` each.
 //! 3. **frame** — the pipeline's frame with those per-pixel counts; any filter.
 //!
 //! The batch system of §4.3 ([`filtrace_adaptive::BatchSchedule`]) runs inside the frame:
 //! with a source that traces single paths ([`PathSource::traces_single_paths`], e.g.
-//! [`crate::RenderSource`]) the counts are scanned into sample offsets and the paths traced
-//! batch by batch, slot-parallel, then reduced per pixel (see [`crate::pipeline`]); other
-//! sources get one call per pixel with its whole count.
+//! [`crate::RenderSource`]) and an explicit batch size
+//! ([`FilteredRenderer::set_batch_size`]) the counts are scanned into sample offsets and
+//! the paths traced batch by batch, slot-parallel, then reduced per pixel; by default the
+//! whole frame is one batch, each pixel's slot range traced in its row's task (see
+//! [`crate::pipeline`]); other sources get one call per pixel with its whole count.
 
 use filtrace_adaptive::{AdaptiveError, AdaptiveParams, SampleCounts};
 use filtrace_core::{Image, Vec2};
@@ -71,7 +73,7 @@ pub fn guide_gbuffer<S: PathSource>(source: &S, settings: &PipelineSettings) -> 
         .for_each(|(y, (nrow, prow))| {
             for x in 0..w {
                 let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: settings.seed };
-                let e = source.trace(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), 0);
+                let e = source.first_hit(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
                 if let Some(hit) = e.hit {
                     nrow[x * 3..x * 3 + 3].copy_from_slice(&hit.normal.to_array());
                     prow[x * 3..x * 3 + 3].copy_from_slice(&e.position.to_array());

@@ -3,9 +3,11 @@
 //! 1. **guide** — one guide ray per pixel through the pixel centre; at its hit: normal,
 //!    depth, albedo, direct light (one light sample) and indirect light (1..N paths, or a
 //!    per-pixel count from adaptive sampling) into the noisy indirect map (§3.1, §3.2).
-//!    A source that traces single paths gets them in batches (the sample-offset buffer,
-//!    sample-to-pixel map and per-pixel reduction of Bauszat et al.'s adaptive-sampling
-//!    paper, §4.3), with the same result as one call per pixel.
+//!    A source that traces single paths gets each pixel's paths in its row's task (the
+//!    frame is one batch), or, with an explicit batch size, in batches (the sample-offset
+//!    buffer, sample-to-pixel map and per-pixel reduction of Bauszat et al.'s
+//!    adaptive-sampling paper, §4.3); every way gives the same bits as one call per pixel.
+//!    The guide rays are written straight into the G-buffer layers (rows in parallel).
 //! 2. **filter** — the indirect map, demodulated by the albedo, is filtered with any
 //!    [`IndirectFilter`] guided by the guide rays' normal and depth (§3.3).
 //! 3. **samples** — every further eye ray of the pixel (jittered in the pixel) traces its
@@ -336,7 +338,9 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
             Some(c) => PathCounts::PerPixel(c),
             None => PathCounts::Uniform(st.indirect_paths),
         };
-        buf.guides.reset(w, h);
+        // Every entry is written by the pass: resize, no clearing.
+        (buf.guides.width, buf.guides.height) = (w, h);
+        buf.guides.hits.resize(n, None);
         buf.guide_direct.resize(n, Rgb::ZERO);
         match self.batch_size {
             Some(batch) if source.traces_single_paths() => {

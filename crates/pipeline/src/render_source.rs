@@ -86,6 +86,17 @@ impl PathSource for RenderSource {
         EyeSample { direct: direct * inv, indirect: indirect * inv, ..base }
     }
 
+    fn first_hit(&self, key: SampleKey, film: Vec2) -> EyeSample {
+        // The eye ray of `trace`, its first hit and visible surface; no light sample.
+        let ctx = self.renderer.context();
+        let offset = film - Vec2::new(key.x as f32, key.y as f32);
+        let ray = self.renderer.camera().generate_ray(key.x, key.y, offset);
+        let Some(si) = ctx.intersect(&ray) else { return EyeSample::default() };
+        let vs = path::visible_surface(&ctx, &si);
+        let hit = Some(HitGeometry { normal: vs.normal, depth: vs.depth });
+        EyeSample { hit, albedo: vs.albedo, position: vs.position, ..Default::default() }
+    }
+
     fn traces_single_paths(&self) -> bool {
         true
     }

@@ -89,6 +89,14 @@ pub trait PathSource: Sync {
         }
     }
 
+    /// The first hit of the eye ray of `key` through `film`: `hit`, `albedo` and `position`
+    /// as [`trace`](PathSource::trace) returns them; `direct` and `indirect` are not part of
+    /// the answer (a source may leave them zero). For G-buffer passes (the adaptive
+    /// sampler's pre-pass), which need no light. The default calls `trace(key, film, 0)`.
+    fn first_hit(&self, key: SampleKey, film: Vec2) -> EyeSample {
+        self.trace(key, film, 0)
+    }
+
     /// The resolution the source was built for (its camera's), if it has one; the
     /// pipeline refuses other frame sizes.
     fn resolution(&self) -> Option<(u32, u32)> {
@@ -108,6 +116,9 @@ impl<S: PathSource + ?Sized> PathSource for &S {
     }
     fn trace_paths(&self, key: SampleKey, film: Vec2, paths: Range<u32>, out: &mut [EyeSample]) {
         (**self).trace_paths(key, film, paths, out)
+    }
+    fn first_hit(&self, key: SampleKey, film: Vec2) -> EyeSample {
+        (**self).first_hit(key, film)
     }
     fn resolution(&self) -> Option<(u32, u32)> {
         (**self).resolution()

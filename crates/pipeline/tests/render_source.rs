@@ -176,3 +176,28 @@ fn pixels_with_more_paths_than_one_trace_paths_call_equal_the_per_pixel_paths() 
         assert_frames_identical(got, &want, &format!("batch {batch:?}"));
     }
 }
+
+#[test]
+fn first_hit_is_the_geometry_of_the_eye_ray_without_its_light() {
+    // `first_hit` (the adaptive pre-pass) against `trace(.., 0)`: the same hit, albedo and
+    // position bit for bit, at the guide rays and at jittered positions, misses included.
+    let (w, h) = (24, 18);
+    let src = RenderSource::new(renderer(w, h, 3, 9));
+    let mut misses = 0;
+    for y in 0..h {
+        for x in 0..w {
+            for (sample, off) in [(0, (0.5, 0.5)), (1, (0.13, 0.91))] {
+                let key = SampleKey { x, y, sample, seed: 9 };
+                let film = filtrace_core::Vec2::new(x as f32 + off.0, y as f32 + off.1);
+                let (a, b) = (src.first_hit(key, film), src.trace(key, film, 0));
+                let bits = |e: &EyeSample| {
+                    let hit = e.hit.map(|h| (h.normal.to_array().map(f32::to_bits), h.depth.to_bits()));
+                    (hit, e.albedo.to_array().map(f32::to_bits), e.position.to_array().map(f32::to_bits))
+                };
+                assert_eq!(bits(&a), bits(&b), "pixel ({x}, {y}), sample {sample}");
+                misses += a.hit.is_none() as u32;
+            }
+        }
+    }
+    assert!(misses < w * h * 2, "the test needs hits");
+}

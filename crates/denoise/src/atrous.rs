@@ -15,8 +15,11 @@
 
 use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, from_planes, to_planes, GBuffer, Guides, Planes3};
-use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
+use crate::kernel::RangeTerms;
+#[cfg(test)]
+use crate::kernel::{edge_avoiding_pass, Tap};
 use crate::pool::Buf;
+use crate::symmetric::{atrous_level, LevelInput};
 use filtrace_core::Image;
 use serde::{Deserialize, Serialize};
 
@@ -103,7 +106,8 @@ impl Default for AtrousParams {
     }
 }
 
-/// The 25 taps of iteration `i`: the B3 kernel with step width `2^i`.
+/// The 25 taps of iteration `i`: the B3 kernel with step width `2^i` (the direct pass).
+#[cfg(test)]
 pub(crate) fn atrous_taps(i: u32) -> Vec<Tap> {
     let step = 1isize << i;
     let mut taps = Vec::with_capacity(25);
@@ -167,7 +171,8 @@ pub fn atrous_into(
     Ok(())
 }
 
-/// One level `c_{i+1} = c_i * h_i` with the edge-stopping weights (eq. 2).
+/// One level `c_{i+1} = c_i * h_i` with the edge-stopping weights (eq. 2), each symmetric
+/// weight evaluated once ([`crate::symmetric`]).
 pub(crate) fn atrous_step(
     input: &Planes3,
     valid: Option<&[f32]>,
@@ -176,19 +181,51 @@ pub(crate) fn atrous_step(
     i: u32,
     out: &mut Planes3,
 ) {
-    if i == 0 {
-        // A pixel with an invalid colour has no colour of its own to compare: give it the
-        // mean of its valid neighbours first, so w_rt compares against something sane.
-        let filled;
-        let input = if let Some(v) = valid.filter(|v| v.contains(&0.0)) {
-            filled = inpaint_invalid(input, v, g.width, g.height);
-            &filled
-        } else {
-            input
+    with_inpainted(input, valid, g, i, |input| {
+        let terms = atrous_terms(params, i);
+        let n = [&g.normal[0][..], &g.normal[1][..], &g.normal[2][..]];
+        // Switched-off terms never read their planes: the normals stand in for absent positions.
+        let (x, terms) = match (&g.position, terms.inv_position) {
+            (Some(p), Some(_)) => ([&p[0][..], &p[1][..], &p[2][..]], terms),
+            _ => (n, RangeTerms { inv_position: None, ..terms }),
         };
-        edge_avoiding_pass(input, valid, g, &atrous_taps(i), atrous_terms(params, i), out);
-    } else {
-        edge_avoiding_pass(input, valid, g, &atrous_taps(i), atrous_terms(params, i), out);
+        let a = LevelInput {
+            c: [&input[0], &input[1], &input[2]],
+            n,
+            x,
+            s: &g.surface,
+            v: valid,
+            width: g.width,
+            height: g.height,
+        };
+        let [o0, o1, o2] = out;
+        atrous_level(&a, 1 << i, terms, [o0, o1, o2]);
+    });
+}
+
+/// [`atrous_step`] by the direct 25-tap sum of [`edge_avoiding_pass`] (every weight
+/// evaluated from both ends): the reference the shared-weight level is tested against.
+#[cfg(test)]
+pub(crate) fn atrous_step_direct(
+    input: &Planes3,
+    valid: Option<&[f32]>,
+    g: &Guides,
+    params: &AtrousParams,
+    i: u32,
+    out: &mut Planes3,
+) {
+    with_inpainted(input, valid, g, i, |input| {
+        edge_avoiding_pass(input, valid, g, &atrous_taps(i), atrous_terms(params, i), out)
+    });
+}
+
+/// Calls `f` with the level's input; at level 0 a pixel with an invalid colour has no colour
+/// of its own to compare, so it first gets the mean of its valid neighbours (w_rt then
+/// compares against something sane).
+fn with_inpainted(input: &Planes3, valid: Option<&[f32]>, g: &Guides, i: u32, f: impl FnOnce(&Planes3)) {
+    match valid.filter(|v| i == 0 && v.contains(&0.0)) {
+        Some(v) => f(&inpaint_invalid(input, v, g.width, g.height)),
+        None => f(input),
     }
 }
 

@@ -42,6 +42,7 @@ pub mod guided;
 mod kernel;
 mod pool;
 pub mod simd;
+mod symmetric;
 
 #[cfg(test)]
 mod tests;

@@ -1,6 +1,7 @@
 //! Tests of the filters against direct naive implementations, and of their documented
 //! behaviour (constants, edges, background, NaN, energy, presets, errors).
 
+use crate::pool::Buf;
 use crate::*;
 
 /// A small deterministic generator (PCG-like LCG) so tests need no extra crate.
@@ -160,6 +161,47 @@ fn atrous_matches_naive() {
         let fast = atrous(&color, &g, &p).unwrap();
         let naive = naive_atrous(&color, &g, &p);
         assert_close(&fast, &naive, 2e-4, &name);
+    }
+}
+
+/// The shared-weight level ([`crate::symmetric`]) against the direct 25-tap sum, level by
+/// level, on sizes around the block width and the border widths, with background pixels,
+/// invalid colours and every weight subset. Only the summation order differs.
+#[test]
+fn symmetric_level_matches_direct_pass() {
+    use crate::atrous::{atrous_step, atrous_step_direct};
+    use crate::gbuffer::{to_planes, Guides};
+    let mut rng = Rng::new(11);
+    let mut cases: Vec<AtrousParams> = AtrousParams::presets().iter().map(|(_, p)| *p).collect();
+    cases.push(AtrousParams { sigma_color: None, sigma_normal: None, ..AtrousParams::paper() });
+    cases.push(AtrousParams { sigma_color: None, sigma_position: Some(0.1), ..AtrousParams::paper() });
+    for (w, h) in [(1, 1), (3, 2), (5, 9), (21, 4), (37, 29), (70, 41), (131, 67)] {
+        let g = random_gbuffer(w, h, &mut rng, true);
+        let mut color = random_color(w, h, &mut rng);
+        if w * h > 50 {
+            color.data_mut()[3 * (w * h / 3) + 1] = f32::NAN;
+            color.data_mut()[3 * (w * h / 2)] = f32::INFINITY;
+        }
+        let guides = Guides::new(&g, w, h).unwrap();
+        let (src, valid) = to_planes(&color);
+        let v = if valid.contains(&0.0) { Some(&valid[..]) } else { None };
+        for p in &cases {
+            for i in 0..5 {
+                let n = w * h;
+                let mut fast = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
+                let mut direct = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
+                atrous_step(&src, v, &guides, p, i, &mut fast);
+                atrous_step_direct(&src, v, &guides, p, i, &mut direct);
+                for c in 0..3 {
+                    for (k, (a, b)) in fast[c].iter().zip(direct[c].iter()).enumerate() {
+                        assert!(
+                            (a - b).abs() <= 2e-6 * (1.0 + b.abs()),
+                            "{w}x{h} level {i} {p:?}: pixel {k} channel {c}: {a} vs {b}"
+                        );
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -32,6 +32,8 @@ fn main() -> Result<(), String> {
             "--bins" => opts.build.bins = val()?.parse().map_err(|e| format!("--bins: {e}"))?,
             "--leaf" => opts.build.max_leaf_size = val()?.parse().map_err(|e| format!("--leaf: {e}"))?,
             "--ctrav" => opts.build.traversal_cost = val()?.parse().map_err(|e| format!("--ctrav: {e}"))?,
+            "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,
+            "--block" => opts.build.leaf_block = val()?.parse().map_err(|e| format!("--block: {e}"))?,
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),

@@ -10,10 +10,15 @@
 //! bit-identical to the scalar test (no fused multiply-adds: the sheared corners and edge
 //! functions round exactly as [`crate::triangle::intersect_watertight`] does).
 //!
-//! Every function here needs AVX2 and FMA; callers check [`available`] first.
+//! Every function here needs AVX2 and FMA; callers check [`available`] first. The small
+//! kernels are `#[inline(always)] unsafe fn`s without target features (a function with
+//! target features cannot be forced inline): they are only called from functions
+//! compiled with `avx2,fma` (`traverse8`, `SceneAccel::intersect_avx2`), into which they
+//! are inlined together with their intrinsics. Calling one elsewhere is unsafe on CPUs
+//! without AVX2 and slow everywhere.
 
 use crate::sah::MAX_DEPTH;
-use crate::tri4::{test4_scalar, Tri4};
+use crate::tri4::{prefetch_packets, test4_scalar, Tri4};
 use crate::triangle::WatertightRay;
 use crate::wide::{prefetch, Entry, Leaves, Node8, FAR_SCALE};
 use filtrace_core::Vec3;
@@ -37,9 +42,8 @@ pub(crate) struct RayBoxes8 {
 }
 
 impl RayBoxes8 {
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+    #[inline(always)]
+    pub unsafe fn new(origin: Vec3, dir: Vec3) -> Self {
         let mut inv = [0.0f32; 3];
         let mut near = [0; 3];
         let mut far = [0; 3];
@@ -58,9 +62,8 @@ impl RayBoxes8 {
 
 /// Slab test of a ray against the eight child boxes of `n`: hit mask (bit `i` for child
 /// `i`) and entry distances.
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+#[inline(always)]
+unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
     let b = n.bounds.as_ptr() as *const f32;
     // SAFETY: `Node8` is 64-byte aligned and its bound rows are 32 bytes, so every row is
     // 32-byte aligned; the row offsets are `8 * row` with `row < 6`.
@@ -114,7 +117,8 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
     loop {
         if cur.count == 0 {
             let node = &nodes[cur.child as usize];
-            let (mask, tn) = box8(node, r, t_min8, *t_max);
+            // SAFETY: this function runs with AVX2 (its target features).
+            let (mask, tn) = unsafe { box8(node, r, t_min8, *t_max) };
             if mask != 0 {
                 // SAFETY: `Lanes8` is 32-byte aligned.
                 unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
@@ -127,7 +131,7 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
                     if node.count[i] == 0 {
                         prefetch(nodes.as_ptr().wrapping_add(node.child[i] as usize) as *const u8, 4);
                     } else {
-                        leaves.prefetch(node.child[i]);
+                        leaves.prefetch(node.child[i], node.count[i]);
                     }
                 }
                 let first = mask.trailing_zeros() as usize;
@@ -203,19 +207,20 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
 /// permuted origin and the shear factors splatted, and the row offsets of the permuted
 /// axes inside a [`Tri4`] corner (as [`crate::tri4::Ray4`]).
 #[derive(Clone, Copy)]
-pub(crate) struct Ray8 {
+pub(crate) struct Ray8<'a> {
     o: [__m256; 3],
     s: [__m256; 3],
     t_min8: __m256,
     t_min: f32,
     row: [usize; 3],
-    ray: WatertightRay,
+    /// By reference: copying it into this struct would read back its scalar stores as
+    /// one vector (a store-forwarding stall on every ray).
+    ray: &'a WatertightRay,
 }
 
-impl Ray8 {
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub fn new(ray: WatertightRay, t_min: f32) -> Self {
+impl<'a> Ray8<'a> {
+    #[inline(always)]
+    pub unsafe fn new(ray: &'a WatertightRay, t_min: f32) -> Self {
         Self {
             o: [
                 _mm256_set1_ps(ray.org[ray.kx]),
@@ -240,13 +245,39 @@ pub(crate) struct Hits8 {
     pub mask: u32,
 }
 
+/// Per-lane results of [`test8v`], in registers: `hit` is all ones in lanes that hit.
+#[derive(Clone, Copy)]
+pub(crate) struct Lanes {
+    hit: __m256,
+    t: __m256,
+    u: __m256,
+    v: __m256,
+}
+
 /// Watertight test of the eight triangles of packets `a` and `b` (pass the same packet
 /// twice and `lanes = 0x0f` for one packet): hit mask within `lanes` and per-lane
-/// `t, u, v` for `t` in `[t_min, t_max]`. Same operations, in the same order, as the SSE
-/// [`crate::tri4`] test.
+/// `t, u, v` for `t` in `[t_min, t_max]`, stored (for tests).
+#[cfg(test)]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hits8 {
+    let l = unsafe { test8v(r, a, b, lanes, t_max) };
+    let mut out = Hits8 { t: [0.0; 8], u: [0.0; 8], v: [0.0; 8], mask: _mm256_movemask_ps(l.hit) as u32 };
+    // SAFETY: `Hits8` is 32-byte aligned and its arrays are 32 bytes each.
+    unsafe {
+        _mm256_store_ps(out.t.as_mut_ptr(), l.t);
+        _mm256_store_ps(out.u.as_mut_ptr(), l.u);
+        _mm256_store_ps(out.v.as_mut_ptr(), l.v);
+    }
+    out
+}
+
+/// [`test8`] with its results in registers and no data-dependent branch (the `t`
+/// division runs whether or not a lane passed the edge tests: on tiny scenes, where about
+/// every other packet holds a candidate, a mispredicted early exit cost more than the
+/// division). Same operations, in the same order, as the SSE [`crate::tri4`] test.
+#[inline(always)]
+pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Lanes {
     let (pa, pb) = (a.v.as_ptr() as *const f32, b.v.as_ptr() as *const f32);
     let [rx, ry, rz] = r.row;
     // Packet `a` in the low half, `b` in the high half of each row.
@@ -282,7 +313,7 @@ pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hit
     );
     if _mm256_movemask_ps(on_edge) as u32 & lanes != 0 {
         // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
-        return test8_scalar(r, a, b, lanes, t_max);
+        return edge_fallback(r, a, b, lanes, t_max);
     }
     let neg = _mm256_or_ps(
         _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(v, zero)),
@@ -294,11 +325,6 @@ pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hit
     );
     let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
     let reject = _mm256_or_ps(_mm256_and_ps(neg, pos), _mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero));
-    let mut mask = !(_mm256_movemask_ps(reject) as u32) & lanes;
-    let mut out = Hits8 { t: [0.0; 8], u: [0.0; 8], v: [0.0; 8], mask: 0 };
-    if mask == 0 {
-        return out;
-    }
     // Hit distance (step 4); NaN lanes (unused) fail both range tests.
     let t_scaled =
         _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
@@ -308,15 +334,15 @@ pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hit
         _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min8),
         _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
     );
-    mask &= _mm256_movemask_ps(in_range) as u32;
-    out.mask = mask;
-    // SAFETY: `Hits8` is 32-byte aligned and its arrays are 32 bytes each.
-    unsafe {
-        _mm256_store_ps(out.t.as_mut_ptr(), t);
-        _mm256_store_ps(out.u.as_mut_ptr(), _mm256_mul_ps(v, rcp));
-        _mm256_store_ps(out.v.as_mut_ptr(), _mm256_mul_ps(w, rcp));
-    }
-    out
+    let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), lane_mask(lanes));
+    Lanes { hit, t, u: _mm256_mul_ps(v, rcp), v: _mm256_mul_ps(w, rcp) }
+}
+
+/// All ones in the lanes set in `lanes` (`0xff` or `0x0f`).
+#[inline(always)]
+unsafe fn lane_mask(lanes: u32) -> __m256 {
+    let high = if lanes == 0xff { -1 } else { 0 };
+    _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, -1, high, high, high, high))
 }
 
 /// The scalar test on the lanes of [`test8`] (its edge fallback, and the reference of
@@ -325,7 +351,7 @@ pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hit
 fn test8_scalar(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hits8 {
     let mut out = Hits8 { t: [0.0; 8], u: [0.0; 8], v: [0.0; 8], mask: 0 };
     for (half, p) in [a, b].into_iter().enumerate() {
-        let (mask, t, u, v) = test4_scalar(&r.ray, p, r.t_min, t_max);
+        let (mask, t, u, v) = test4_scalar(r.ray, p, r.t_min, t_max);
         out.mask |= mask << (4 * half);
         out.t[4 * half..4 * half + 4].copy_from_slice(&t);
         out.u[4 * half..4 * half + 4].copy_from_slice(&u);
@@ -335,67 +361,125 @@ fn test8_scalar(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hits8 {
     out
 }
 
+/// [`test8_scalar`] as [`Lanes`].
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+fn edge_fallback(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Lanes {
+    let h = test8_scalar(r, a, b, lanes, t_max);
+    let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let m = _mm256_and_si256(_mm256_set1_epi32(h.mask as i32), bits);
+    // SAFETY: `Hits8` arrays are 32-byte aligned.
+    unsafe {
+        Lanes {
+            hit: _mm256_castsi256_ps(_mm256_cmpeq_epi32(m, bits)),
+            t: _mm256_load_ps(h.t.as_ptr()),
+            u: _mm256_load_ps(h.u.as_ptr()),
+            v: _mm256_load_ps(h.v.as_ptr()),
+        }
+    }
+}
+
+/// Closest hit among `packets` with `t` in `[t_min, t_max]`: `(t, u, v, 4 packet +
+/// lane)` relative to the slice. Packets are tested in pairs; each lane keeps its nearest
+/// hit in registers (no branch per pair), and one horizontal minimum at the end picks
+/// the lane (on equal `t`, the lowest lane, then the first pair).
+#[inline(always)]
+pub(crate) unsafe fn closest_in(r: &Ray8, packets: &[Tri4], t_max: f32) -> Option<(f32, f32, f32, usize)> {
+    let inf = _mm256_set1_ps(f32::INFINITY);
+    let (mut bt, mut bu, mut bv) = (inf, _mm256_setzero_ps(), _mm256_setzero_ps());
+    let mut bp = _mm256_set1_epi32(-1);
+    for (j, pair) in packets.chunks(2).enumerate() {
+        let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
+        let l = test8v(r, &pair[0], b, lanes, t_max);
+        let closer = _mm256_and_ps(l.hit, _mm256_cmp_ps::<_CMP_LT_OQ>(l.t, bt));
+        bt = _mm256_blendv_ps(bt, l.t, closer);
+        bu = _mm256_blendv_ps(bu, l.u, closer);
+        bv = _mm256_blendv_ps(bv, l.v, closer);
+        bp = _mm256_castps_si256(_mm256_blendv_ps(
+            _mm256_castsi256_ps(bp),
+            _mm256_castsi256_ps(_mm256_set1_epi32(j as i32)),
+            closer,
+        ));
+    }
+    let hit = _mm256_movemask_ps(_mm256_castsi256_ps(bp)) as u32 ^ 0xff;
+    if hit == 0 {
+        return None;
+    }
+    // Horizontal minimum of `bt` (missed lanes hold +inf).
+    let m = _mm256_min_ps(bt, _mm256_permute2f128_ps::<1>(bt, bt));
+    let m = _mm256_min_ps(m, _mm256_permute_ps::<0b01_00_11_10>(m));
+    let m = _mm256_min_ps(m, _mm256_permute_ps::<0b10_11_00_01>(m));
+    let lane =
+        (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(bt, m)) as u32 & hit).trailing_zeros() as usize;
+    let (mut t, mut u, mut v, mut p) = (Lanes8([0.0; 8]), Lanes8([0.0; 8]), Lanes8([0.0; 8]), [0i32; 8]);
+    // SAFETY: `Lanes8` is 32-byte aligned; `p` is written with an unaligned store.
+    unsafe {
+        _mm256_store_ps(t.0.as_mut_ptr(), bt);
+        _mm256_store_ps(u.0.as_mut_ptr(), bu);
+        _mm256_store_ps(v.0.as_mut_ptr(), bv);
+        _mm256_storeu_si256(p.as_mut_ptr() as *mut __m256i, bp);
+    }
+    Some((t.0[lane], u.0[lane], v.0[lane], 4 * 2 * p[lane] as usize + lane))
+}
+
 /// Closest-hit leaf test over packet pairs; `best` holds `(t, u, v, 4 packet + lane)`.
 pub(crate) struct ClosestPairs<'a> {
     pub packets: &'a [Tri4],
-    pub ray: Ray8,
+    /// The mesh triangle ids of the packet lanes (prefetched on a hit: without that, the
+    /// id lookup after traversal was a cache miss costing ~15 % of a closest-hit query
+    /// on the 270k-triangle sphere).
+    pub prim_ids: &'a [u32],
+    pub ray: Ray8<'a>,
     pub best: Option<(f32, f32, f32, usize)>,
 }
 
 impl Leaves for &mut ClosestPairs<'_> {
     #[inline(always)]
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
-        let (first, end) = (first as usize, (first + count) as usize);
-        let leaf = &self.packets[first..end];
-        for (j, pair) in leaf.chunks(2).enumerate() {
-            let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
-            // SAFETY: the AVX2 traversal runs only where `available()` (see `Simd`).
-            let h = unsafe { test8(&self.ray, &pair[0], b, lanes, *t_max) };
-            if h.mask == 0 {
-                continue;
-            }
-            // Lowest t; the first such lane (the scalar order).
-            let mut best = h.mask.trailing_zeros() as usize;
-            let mut rest = h.mask & (h.mask - 1);
-            while rest != 0 {
-                let i = rest.trailing_zeros() as usize;
-                rest &= rest - 1;
-                if h.t[i] < h.t[best] {
-                    best = i;
-                }
-            }
-            *t_max = h.t[best];
-            self.best = Some((h.t[best], h.u[best], h.v[best], 4 * (first + 2 * j) + best));
+        let leaf = &self.packets[first as usize..(first + count) as usize];
+        // SAFETY: the AVX2 traversal runs only where `available()` (see `Simd`).
+        if let Some((t, u, v, i)) = unsafe { closest_in(&self.ray, leaf, *t_max) } {
+            *t_max = t;
+            let k = 4 * first as usize + i;
+            prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
+            self.best = Some((t, u, v, k));
         }
         false
     }
 
     #[inline(always)]
-    fn prefetch(&self, first: u32) {
-        prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    fn prefetch(&self, first: u32, count: u32) {
+        prefetch_packets(self.packets, first, count);
     }
 }
 
 /// Any-hit leaf test over packet pairs.
 pub(crate) struct AnyPairs<'a> {
     pub packets: &'a [Tri4],
-    pub ray: Ray8,
+    pub ray: Ray8<'a>,
 }
 
 impl Leaves for AnyPairs<'_> {
     #[inline(always)]
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
-        let leaf = &self.packets[first as usize..(first + count) as usize];
-        leaf.chunks(2).any(|pair| {
-            let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
+        // A plain loop: a closure would not inherit the AVX2 target features and would
+        // keep the kernels from being inlined.
+        let (mut i, end) = (first as usize, (first + count) as usize);
+        while i < end {
+            let (b, lanes) =
+                if i + 1 < end { (&self.packets[i + 1], 0xff) } else { (&self.packets[i], 0x0f) };
             // SAFETY: as in `ClosestPairs`.
-            unsafe { test8(&self.ray, &pair[0], b, lanes, *t_max) }.mask != 0
-        })
+            if unsafe { _mm256_movemask_ps(test8v(&self.ray, &self.packets[i], b, lanes, *t_max).hit) } != 0 {
+                return true;
+            }
+            i += 2;
+        }
+        false
     }
 
     #[inline(always)]
-    fn prefetch(&self, first: u32) {
-        prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    fn prefetch(&self, first: u32, count: u32) {
+        prefetch_packets(self.packets, first, count);
     }
 }
 
@@ -428,7 +512,8 @@ mod tests {
             let (t_min, t_max) = (0.1 * rnd().abs(), 1.0 + 3.0 * rnd().abs());
             // SAFETY: checked `available()` above.
             let (fast, slow) = unsafe {
-                let r = Ray8::new(WatertightRay::new(o, d), t_min);
+                let wr = WatertightRay::new(o, d);
+                let r = Ray8::new(&wr, t_min);
                 (test8(&r, &a, b, lanes, t_max), test8_scalar(&r, &a, b, lanes, t_max))
             };
             assert_eq!(fast.mask, slow.mask);
@@ -441,6 +526,21 @@ mod tests {
                 }
             }
             hits += fast.mask.count_ones();
+            // The closest of the lanes, as the scalar test sees it.
+            let packets = if n > 4 { vec![a, *b] } else { vec![a] };
+            // SAFETY: checked `available()` above.
+            let closest =
+                unsafe { closest_in(&Ray8::new(&WatertightRay::new(o, d), t_min), &packets, t_max) };
+            let best =
+                (0..8).filter(|l| slow.mask & (1 << l) != 0).min_by(|&i, &j| slow.t[i].total_cmp(&slow.t[j]));
+            match (closest, best) {
+                (None, None) => {}
+                (Some((t, u, v, lane)), Some(b)) => {
+                    assert_eq!(t, slow.t[b]);
+                    assert_eq!((t, u, v), (slow.t[lane], slow.u[lane], slow.v[lane]));
+                }
+                other => panic!("closest_in {other:?}"),
+            }
         }
         assert!(hits > 2000, "{hits}");
     }

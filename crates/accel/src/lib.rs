@@ -121,6 +121,9 @@ struct Blas {
     tri_count: usize,
     /// Object-space bounds of all triangles.
     bounds: Aabb,
+    /// No hierarchy: every query tests all packets, as one leaf
+    /// ([`BuildParams::max_flat_triangles`]); `nodes` and `nodes8` are empty.
+    flat: bool,
 }
 
 impl Blas {
@@ -138,6 +141,12 @@ impl Blas {
                 t.iter().all(|p| p.is_finite()).then(|| (i as u32, Aabb::from_points(t)))
             })
             .unzip();
+        if ids.is_empty() {
+            return Self::default();
+        }
+        if ids.len() <= params.max_flat_triangles {
+            return Self::build_flat(&ids, &boxes, tri);
+        }
         let (root, order) = sah::build_binary(&boxes, params);
         let Some(root) = root else { return Self::default() };
         let mut packets = Vec::new();
@@ -157,7 +166,37 @@ impl Blas {
             Simd::Sse => (wide::collapse(&root, &mut leaf), Vec::new()),
             Simd::Avx2 => (Vec::new(), wide::collapse(&root, &mut leaf)),
         };
-        Self { nodes, nodes8, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds() }
+        Self { nodes, nodes8, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds(), flat: false }
+    }
+
+    /// The flat bottom level of a tiny mesh: triangles `ids` (boxes `boxes`) in packets,
+    /// largest area first, so that any-hit queries meet the likeliest occluders first.
+    fn build_flat(ids: &[u32], boxes: &[Aabb], tri: impl Fn(usize) -> [Vec3; 3]) -> Self {
+        let area = |k: usize| {
+            let [a, b, c] = tri(ids[k] as usize);
+            (b - a).cross(c - a).length()
+        };
+        let mut order: Vec<usize> = (0..ids.len()).collect();
+        order.sort_by(|&i, &j| area(j).total_cmp(&area(i)).then(i.cmp(&j)));
+        let packets = order
+            .chunks(4)
+            .map(|c| {
+                Tri4::pack(&c.iter().map(|&k| tri(ids[k] as usize).map(|v| v.to_array())).collect::<Vec<_>>())
+            })
+            .collect();
+        let prim_ids = order
+            .chunks(4)
+            .flat_map(|c| (0..4).map(move |l| c.get(l).map_or(u32::MAX, |&k| ids[k])))
+            .collect();
+        Self {
+            nodes: Vec::new(),
+            nodes8: Vec::new(),
+            packets,
+            prim_ids,
+            tri_count: ids.len(),
+            bounds: boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union),
+            flat: true,
+        }
     }
 
     /// Closest hit in object space; shortens `*t_max` and returns `(t, u, v, prim)`.
@@ -175,9 +214,20 @@ impl Blas {
             // SAFETY: `SceneAccel` builds 8-wide nodes only where AVX2 is available.
             return unsafe { self.intersect8(o, d, t_min, t_max) };
         }
+        if self.flat {
+            let mut leaves = ClosestPackets {
+                packets: &self.packets,
+                prim_ids: &self.prim_ids,
+                ray: Ray4::new(WatertightRay::new(o, d), t_min),
+                best: None,
+            };
+            wide::Leaves::visit(&mut &mut leaves, 0, self.packets.len() as u32, t_max);
+            return leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]));
+        }
         let rb = RayBoxes::new(o, d);
         let mut leaves = ClosestPackets {
             packets: &self.packets,
+            prim_ids: &self.prim_ids,
             ray: Ray4::new(WatertightRay::new(o, d), t_min),
             best: None,
         };
@@ -188,14 +238,27 @@ impl Blas {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn intersect8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: &mut f32) -> Option<(f32, f32, f32, u32)> {
-        let rb = avx2::RayBoxes8::new(o, d);
+    /// Safety: the CPU has AVX2 and FMA (`Simd::Avx2.available()`).
+    unsafe fn intersect8(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t_min: f32,
+        t_max: &mut f32,
+    ) -> Option<(f32, f32, f32, u32)> {
+        let wr = WatertightRay::new(o, d);
         let mut leaves = avx2::ClosestPairs {
             packets: &self.packets,
-            ray: avx2::Ray8::new(WatertightRay::new(o, d), t_min),
+            prim_ids: &self.prim_ids,
+            ray: avx2::Ray8::new(&wr, t_min),
             best: None,
         };
-        avx2::traverse8::<_, true>(&self.nodes8, &rb, t_min, t_max, &mut leaves);
+        if self.flat {
+            wide::Leaves::visit(&mut &mut leaves, 0, self.packets.len() as u32, t_max);
+        } else {
+            let rb = avx2::RayBoxes8::new(o, d);
+            avx2::traverse8::<_, true>(&self.nodes8, &rb, t_min, t_max, &mut leaves);
+        }
         leaves.best.map(|(t, u, v, i)| (t, u, v, self.prim_ids[i]))
     }
 
@@ -206,20 +269,28 @@ impl Blas {
             // SAFETY: as in `intersect`.
             return unsafe { self.occluded8(o, d, t_min, t_max) };
         }
-        let rb = RayBoxes::new(o, d);
         let mut t_max = t_max;
-        let leaves = AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
+        let mut leaves =
+            AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
+        if self.flat {
+            return wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
+        }
+        let rb = RayBoxes::new(o, d);
         wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
-        let rb = avx2::RayBoxes8::new(o, d);
+    /// Safety: the CPU has AVX2 and FMA (`Simd::Avx2.available()`).
+    unsafe fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+        let wr = WatertightRay::new(o, d);
         let mut t_max = t_max;
-        let leaves =
-            avx2::AnyPairs { packets: &self.packets, ray: avx2::Ray8::new(WatertightRay::new(o, d), t_min) };
+        let mut leaves = avx2::AnyPairs { packets: &self.packets, ray: avx2::Ray8::new(&wr, t_min) };
+        if self.flat {
+            return wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
+        }
+        let rb = avx2::RayBoxes8::new(o, d);
         avx2::traverse8::<_, false>(&self.nodes8, &rb, t_min, &mut t_max, leaves)
     }
 
@@ -258,7 +329,11 @@ impl Blas {
                 .filter(|&l| pk.used(l))
                 .fold(Aabb::EMPTY, |b, l| b.union(Aabb::from_points(pk.lane(l).map(Vec3::from_array))))
         };
-        if self.nodes8.is_empty() {
+        if self.flat {
+            if !self.nodes.is_empty() || !self.nodes8.is_empty() {
+                return Err("flat bottom level with nodes".into());
+            }
+        } else if self.nodes8.is_empty() {
             wide::validate(&self.nodes, self.packets.len(), packet_box)?;
         } else if self.nodes.is_empty() {
             wide::validate(&self.nodes8, self.packets.len(), packet_box)?;
@@ -303,6 +378,8 @@ pub struct BvhStats {
 /// Closest-hit leaf test over triangle packets; `best` holds `(t, u, v, 4 packet + lane)`.
 struct ClosestPackets<'a> {
     packets: &'a [Tri4],
+    /// Lane ids, prefetched on a hit (see `avx2::ClosestPairs`).
+    prim_ids: &'a [u32],
     ray: Ray4,
     best: Option<(f32, f32, f32, usize)>,
 }
@@ -315,15 +392,17 @@ impl wide::Leaves for &mut ClosestPackets<'_> {
             let p = unsafe { self.packets.get_unchecked(i as usize) };
             if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, *t_max) {
                 *t_max = t;
-                self.best = Some((t, u, v, 4 * i as usize + lane));
+                let k = 4 * i as usize + lane;
+                wide::prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
+                self.best = Some((t, u, v, k));
             }
         }
         false
     }
 
     #[inline(always)]
-    fn prefetch(&self, first: u32) {
-        wide::prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    fn prefetch(&self, first: u32, count: u32) {
+        tri4::prefetch_packets(self.packets, first, count);
     }
 }
 
@@ -344,8 +423,8 @@ impl wide::Leaves for AnyPacket<'_> {
     }
 
     #[inline(always)]
-    fn prefetch(&self, first: u32) {
-        wide::prefetch(self.packets.as_ptr().wrapping_add(first as usize) as *const u8, 3);
+    fn prefetch(&self, first: u32, count: u32) {
+        tri4::prefetch_packets(self.packets, first, count);
     }
 }
 

@@ -35,6 +35,12 @@ pub struct BuildParams {
     pub leaf_block: usize,
     /// Subtrees with more primitives than this are built in parallel.
     pub parallel_threshold: usize,
+    /// Bottom levels of at most this many triangles get no hierarchy: every ray tests
+    /// all their packets, largest triangles first (the flat path of `SceneAccel`). On
+    /// tiny closed scenes such as the Cornell box (36 triangles) every box of a BVH
+    /// overlaps the room, so node tests buy no culling; see `docs/perf-accel.md` for the
+    /// measurements behind the value of the presets.
+    pub max_flat_triangles: usize,
 }
 
 impl BuildParams {
@@ -47,6 +53,7 @@ impl BuildParams {
             intersection_cost: 1.0,
             leaf_block: 4,
             parallel_threshold: 4096,
+            max_flat_triangles: 64,
         }
     }
 
@@ -59,6 +66,7 @@ impl BuildParams {
             intersection_cost: 1.0,
             leaf_block: 4,
             parallel_threshold: 4096,
+            max_flat_triangles: 64,
         }
     }
 
@@ -71,6 +79,7 @@ impl BuildParams {
             intersection_cost: 1.0,
             leaf_block: 4,
             parallel_threshold: 4096,
+            max_flat_triangles: 64,
         }
     }
 

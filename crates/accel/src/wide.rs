@@ -246,9 +246,9 @@ pub(crate) const STACK: usize = 3 * MAX_DEPTH + 4;
 pub(crate) trait Leaves {
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool;
 
-    /// Hint that the leaf starting at `first` will be visited soon.
+    /// Hint that the leaf `first .. first + count` will be visited soon.
     #[inline(always)]
-    fn prefetch(&self, _first: u32) {}
+    fn prefetch(&self, _first: u32, _count: u32) {}
 }
 
 impl<F: FnMut(u32, u32, &mut f32) -> bool> Leaves for F {
@@ -291,7 +291,7 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
                     if node.count[i] == 0 {
                         prefetch(nodes.as_ptr().wrapping_add(node.child[i] as usize) as *const u8, 2);
                     } else {
-                        leaves.prefetch(node.child[i]);
+                        leaves.prefetch(node.child[i], node.count[i]);
                     }
                 }
                 if rest == 0 {

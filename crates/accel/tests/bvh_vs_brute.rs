@@ -108,23 +108,29 @@ fn kernels() -> Vec<Simd> {
     }
 }
 
-/// Builds `scene` for every kernel.
+/// Builds `scene` for every kernel; small scenes also without the flat path (a BVH over
+/// their few triangles), so that both bottom-level kinds are tested on them.
 fn accels(scene: &Scene, params: &BuildParams) -> Vec<SceneAccel> {
-    kernels()
-        .into_iter()
-        .map(|simd| {
-            let a = SceneAccel::build_simd(scene, params, simd);
+    let mut variants = vec![params.clone()];
+    if scene.triangle_count() <= params.max_flat_triangles {
+        variants.push(BuildParams { max_flat_triangles: 0, ..params.clone() });
+    }
+    let mut out = Vec::new();
+    for p in &variants {
+        for simd in kernels() {
+            let a = SceneAccel::build_simd(scene, p, simd);
             assert_eq!(a.simd(), simd);
-            a
-        })
-        .collect()
+            out.push(a);
+        }
+    }
+    out
 }
 
 fn check_scene(scene: &Scene, n: usize, seed: u64) {
     let brute = BruteForce::build(scene);
     for (preset, params) in BuildParams::presets() {
         for accel in accels(scene, &params) {
-            let name = format!("{preset} {:?}", accel.simd());
+            let name = format!("{preset} {:?} ({} nodes)", accel.simd(), accel.stats().nodes);
             accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
             let rays = random_rays(scene, n, seed);
             let mut hits = 0;
@@ -217,12 +223,14 @@ fn axis_aligned_rays_with_zero_direction_components() {
 #[test]
 fn degenerate_inputs_give_no_hit_and_no_panic() {
     for simd in kernels() {
-        degenerate_inputs_with(simd);
+        for flat in [0, 64] {
+            degenerate_inputs_with(simd, &BuildParams { max_flat_triangles: flat, ..BuildParams::default() });
+        }
     }
 }
 
-fn degenerate_inputs_with(simd: Simd) {
-    let build = |s: &Scene| SceneAccel::build_simd(s, &BuildParams::default(), simd);
+fn degenerate_inputs_with(simd: Simd, params: &BuildParams) {
+    let build = |s: &Scene| SceneAccel::build_simd(s, params, simd);
     let empty = build(&Scene::default());
     let ray = Ray::new(Vec3::ZERO, Vec3::X);
     assert!(empty.intersect(&ray).is_none() && !empty.occluded(&ray));

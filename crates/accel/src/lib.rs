@@ -215,6 +215,9 @@ impl Blas {
             return unsafe { self.intersect8(o, d, t_min, t_max) };
         }
         if self.flat {
+            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.bounds) {
+                return None;
+            }
             let mut leaves = ClosestPackets {
                 packets: &self.packets,
                 prim_ids: &self.prim_ids,
@@ -254,6 +257,11 @@ impl Blas {
             best: None,
         };
         if self.flat {
+            // Rays from outside (camera rays, half of which miss a Cornell box) are culled
+            // by the bounds; rays from inside pay six compares.
+            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.bounds) {
+                return None;
+            }
             wide::Leaves::visit(&mut &mut leaves, 0, self.packets.len() as u32, t_max);
         } else {
             let rb = avx2::RayBoxes8::new(o, d);
@@ -273,7 +281,8 @@ impl Blas {
         let mut leaves =
             AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         if self.flat {
-            return wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
+            return wide::ray_touches_box(o, d, t_min, t_max, &self.bounds)
+                && wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
         }
         let rb = RayBoxes::new(o, d);
         wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
@@ -288,7 +297,8 @@ impl Blas {
         let mut t_max = t_max;
         let mut leaves = avx2::AnyPairs { packets: &self.packets, ray: avx2::Ray8::new(&wr, t_min) };
         if self.flat {
-            return wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
+            return wide::ray_touches_box(o, d, t_min, t_max, &self.bounds)
+                && wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
         }
         let rb = avx2::RayBoxes8::new(o, d);
         avx2::traverse8::<_, false>(&self.nodes8, &rb, t_min, &mut t_max, leaves)

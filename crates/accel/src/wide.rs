@@ -214,6 +214,26 @@ fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
     (mask, t_near)
 }
 
+/// Whether the ray `o + t d`, `t` in `[t_min, t_max]`, can touch box `b`: the scalar
+/// form of the slab test (conservative in the same way: NaN slabs are skipped and the far
+/// distance widened by `1 + 2 gamma_3`). A ray starting inside the box answers at once.
+#[inline(always)]
+pub(crate) fn ray_touches_box(o: Vec3, d: Vec3, t_min: f32, t_max: f32, b: &Aabb) -> bool {
+    if o.cmpge(b.min).all() && o.cmple(b.max).all() {
+        return true;
+    }
+    let (mut t_near, mut t_far) = (t_min, t_max);
+    for k in 0..3 {
+        let inv = 1.0 / d[k];
+        let (lo, hi) = ((b.min[k] - o[k]) * inv, (b.max[k] - o[k]) * inv);
+        let (near, far) = if inv >= 0.0 { (lo, hi) } else { (hi, lo) };
+        // NaN (origin in the slab plane, zero direction) fails the comparison: skipped.
+        t_near = if near > t_near { near } else { t_near };
+        t_far = if far < t_far { far } else { t_far };
+    }
+    t_near <= t_far * FAR_SCALE
+}
+
 /// Software prefetch of `lines` cache lines from `p` into L1 (no-op off x86_64). Never
 /// faults, whatever the address.
 #[inline(always)]

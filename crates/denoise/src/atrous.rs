@@ -15,11 +15,9 @@
 
 use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, from_planes, to_planes, GBuffer, Guides, Planes3};
-use crate::kernel::RangeTerms;
-#[cfg(test)]
-use crate::kernel::{edge_avoiding_pass, Tap};
+use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
-use crate::symmetric::{atrous_level, LevelInput};
+use crate::symmetric::{atrous_level, ring_fits, LevelInput};
 use filtrace_core::Image;
 use serde::{Deserialize, Serialize};
 
@@ -107,7 +105,6 @@ impl Default for AtrousParams {
 }
 
 /// The 25 taps of iteration `i`: the B3 kernel with step width `2^i` (the direct pass).
-#[cfg(test)]
 pub(crate) fn atrous_taps(i: u32) -> Vec<Tap> {
     let step = 1isize << i;
     let mut taps = Vec::with_capacity(25);
@@ -172,7 +169,8 @@ pub fn atrous_into(
 }
 
 /// One level `c_{i+1} = c_i * h_i` with the edge-stopping weights (eq. 2), each symmetric
-/// weight evaluated once ([`crate::symmetric`]).
+/// weight evaluated once ([`crate::symmetric`]); levels whose ring of weight rows would be
+/// too large (steps of 128 and more at 1080p) take the direct 25-tap pass.
 pub(crate) fn atrous_step(
     input: &Planes3,
     valid: Option<&[f32]>,
@@ -181,6 +179,9 @@ pub(crate) fn atrous_step(
     i: u32,
     out: &mut Planes3,
 ) {
+    if !ring_fits(g.width, g.height, 1 << i) {
+        return atrous_step_direct(input, valid, g, params, i, out);
+    }
     with_inpainted(input, valid, g, i, |input| {
         let terms = atrous_terms(params, i);
         let n = [&g.normal[0][..], &g.normal[1][..], &g.normal[2][..]];
@@ -205,7 +206,6 @@ pub(crate) fn atrous_step(
 
 /// [`atrous_step`] by the direct 25-tap sum of [`edge_avoiding_pass`] (every weight
 /// evaluated from both ends): the reference the shared-weight level is tested against.
-#[cfg(test)]
 pub(crate) fn atrous_step_direct(
     input: &Planes3,
     valid: Option<&[f32]>,

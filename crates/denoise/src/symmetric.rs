@@ -24,7 +24,7 @@
 //! split, so results do not depend on the thread count.
 
 use crate::kernel::RangeTerms;
-use crate::simd::{exp_neg_g, isa, madd, Isa};
+use crate::simd::{isa, madd, scaled_exp_neg, Isa};
 use rayon::prelude::*;
 
 /// The half offsets `(dx, dy)` in units of the step width: `dy > 0`, or `dy = 0, dx > 0`.
@@ -50,8 +50,8 @@ pub(crate) struct LevelInput<'a> {
 /// Geometry of one level: half offsets, kernel weights, ring layout.
 struct Level {
     step: usize,
-    /// Per half offset: `dx`, `dy` in pixels, flat offset `dy * width + dx`, `h(o)`.
-    half: [(isize, usize, usize, f32); 12],
+    /// Per half offset: `dx`, `dy` in pixels, flat offset `dy * width + dx`, `(h(o), log2 h(o))`.
+    half: [(isize, usize, usize, (f32, f32)); 12],
     /// `h` of the centre tap.
     h_centre: f32,
     inv: [f32; 3],
@@ -62,21 +62,23 @@ struct Level {
 }
 
 impl Level {
-    fn new(width: usize, step: usize, inv: [f32; 3]) -> Self {
+    fn new(width: usize, height: usize, step: usize, inv: [f32; 3]) -> Self {
         let b3 = crate::atrous::B3_SPLINE;
         let s = step as isize;
         let half = HALF.map(|(kx, ky)| {
             let (dx, dy) = (kx * s, (ky * s) as usize);
             // Flat offset modulo 2^64: applied with wrapping arithmetic to in-image pixels only.
             let off = ((dy * width) as isize + dx) as usize;
-            (dx, dy, off, b3[(kx + 2) as usize] * b3[(ky + 2) as usize])
+            let h = b3[(kx + 2) as usize] * b3[(ky + 2) as usize];
+            (dx, dy, off, (h, h.log2()))
         });
         Self {
             step,
             half,
             h_centre: b3[2] * b3[2],
             inv,
-            ring_rows: 2 * step + 1,
+            // Rows y, y - step, y - 2 step in distinct slots (all rows when fewer).
+            ring_rows: (2 * step + 1).min(height.max(1)),
             ring_width: width + 4 * step,
         }
     }
@@ -156,7 +158,7 @@ fn weight<const WC: bool, const WN: bool, const WX: bool, const B: usize, const 
     inv: [f32; 3],
     pc: &Centre<B>,
     q: usize,
-    h: f32,
+    (h, log2_h): (f32, f32),
 ) -> [f32; B] {
     // The first term initialises `e` (a multiply), the others add to it.
     let mut e = [0.0f32; B];
@@ -172,10 +174,9 @@ fn weight<const WC: bool, const WN: bool, const WX: bool, const B: usize, const 
     let qs = ldu::<B>(a.s, q);
     let mut w = [0.0f32; B];
     for i in 0..B {
-        w[i] = h * (1.0 - (pc.s[i] - qs[i]).abs());
-        if WC || WN || WX {
-            w[i] *= exp_neg_g::<F>(e[i]);
-        }
+        let hw = if WC || WN || WX { scaled_exp_neg::<F>(e[i], log2_h) } else { h };
+        // Background and surface never mix (s is 0 or 1).
+        w[i] = if pc.s[i] == qs[i] { hw } else { 0.0 };
     }
     w
 }
@@ -506,6 +507,16 @@ fn band_rows(h: usize, step: usize) -> usize {
     h.div_ceil(2 * threads).max(8 * step).max(1)
 }
 
+/// Largest ring of weight rows per band (bytes): 16 MB, steps up to 64 at 1080p.
+const MAX_RING_BYTES: usize = 16 << 20;
+
+/// True when the ring of weight rows of a level with step width `step` stays below
+/// [`MAX_RING_BYTES`] (else the caller takes the direct pass).
+pub(crate) fn ring_fits(width: usize, height: usize, step: usize) -> bool {
+    let rows = (2 * step + 1).min(height.max(1));
+    12 * rows * (width + 4 * step) * 4 <= MAX_RING_BYTES
+}
+
 /// One À-Trous level `c_{i+1} = c_i * h_i` with step width `step` (Dammertz et al. 2010,
 /// eqs. 2-5) into `dst`. Terms set to `None` in `terms` are off; `a.x` is only read when the
 /// position term is on.
@@ -517,7 +528,7 @@ pub(crate) fn atrous_level(a: &LevelInput, step: usize, terms: RangeTerms, dst: 
     let inv =
         [terms.inv_color.unwrap_or(0.0), terms.inv_normal.unwrap_or(0.0), terms.inv_position.unwrap_or(0.0)];
     debug_assert!(inv.iter().all(|v| v.is_finite() && *v >= 0.0));
-    let lv = Level::new(w, step, inv);
+    let lv = Level::new(w, h, step, inv);
     let isa = isa();
     let rows = band_rows(h, step);
     let ring_len = 12 * lv.ring_rows * lv.ring_width;

@@ -194,6 +194,14 @@ fn symmetric_level_matches_direct_pass() {
                 atrous_step_direct(&src, v, &guides, p, i, &mut direct);
                 for c in 0..3 {
                     for (k, (a, b)) in fast[c].iter().zip(direct[c].iter()).enumerate() {
+                        // A pixel with an invalid colour has no centre weight: at coarse
+                        // levels its weights can all be ~1e-30, where the shared-weight pass
+                        // flushes those below 2^-100 to 0 (`scaled_exp_neg`) and the direct
+                        // one keeps them; only finiteness is compared there.
+                        if valid[k] == 0.0 {
+                            assert!(a.is_finite(), "{w}x{h} level {i}: pixel {k} is {a}");
+                            continue;
+                        }
                         assert!(
                             (a - b).abs() <= 2e-6 * (1.0 + b.abs()),
                             "{w}x{h} level {i} {p:?}: pixel {k} channel {c}: {a} vs {b}"

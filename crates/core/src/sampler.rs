@@ -163,10 +163,11 @@ pub fn hash_combine(seed: u32, v: u32) -> u32 {
     seed ^ v.wrapping_add(0x9e37_79b9).wrapping_add(seed << 6).wrapping_add(seed >> 2)
 }
 
-/// 0.32 fixed point to a float in `[0, 1)` (the top 24 bits, exactly representable).
+/// 0.32 fixed point to a float in `[0, 1)` (the top 24 bits, exactly representable: the
+/// largest value is `(2^24 - 1) / 2^24 = ONE_MINUS_EPSILON`, so no clamp is needed).
 #[inline]
 pub fn to_unit_float(x: u32) -> f32 {
-    ((x >> 8) as f32 * (1.0 / 16_777_216.0)).min(ONE_MINUS_EPSILON)
+    (x >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// The shuffled, Owen-scrambled Sobol pair of `index` for the given 32-bit `seed`
@@ -285,6 +286,7 @@ mod tests {
             }
         }
         assert!(to_unit_float(u32::MAX) < 1.0);
+        assert_eq!(to_unit_float(u32::MAX), ONE_MINUS_EPSILON);
     }
 
     #[test]

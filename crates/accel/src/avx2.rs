@@ -160,28 +160,27 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
                     cur = near;
                     continue;
                 }
-                // Sort the (3 to 8) hit children by entry distance, farthest first.
-                let mut hits = [e(first); 8];
-                let mut k = 1;
-                let mut bits = rest;
+                // Three to eight hits: insertion-sort them straight onto the stack by
+                // entry distance, farthest deepest, and continue with the nearest.
+                debug_assert!(sp + 8 <= STACK8, "BVH deeper than MAX_DEPTH");
+                let base = sp;
+                let mut bits = mask;
                 while bits != 0 {
                     let i = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     let h = e(i);
-                    let mut j = k;
-                    while j > 0 && hits[j - 1].t < h.t {
-                        hits[j] = hits[j - 1];
+                    let mut j = sp;
+                    // SAFETY: entries `base..sp` were written in this loop.
+                    while j > base && unsafe { stack[j - 1].assume_init() }.t < h.t {
+                        stack[j] = stack[j - 1];
                         j -= 1;
                     }
-                    hits[j] = h;
-                    k += 1;
-                }
-                debug_assert!(sp + k - 1 <= STACK8, "BVH deeper than MAX_DEPTH");
-                for h in &hits[..k - 1] {
-                    stack[sp] = MaybeUninit::new(*h);
+                    stack[j] = MaybeUninit::new(h);
                     sp += 1;
                 }
-                cur = hits[k - 1];
+                sp -= 1;
+                // SAFETY: written just above.
+                cur = unsafe { stack[sp].assume_init() };
                 continue;
             }
         } else if leaves.visit(cur.child, cur.count, t_max) {

@@ -31,7 +31,8 @@ pub struct BuildParams {
     pub intersection_cost: f32,
     /// Primitives are tested `leaf_block` at a time (4: the SIMD triangle packets), so
     /// leaf and child costs count blocks, `ceil(n / leaf_block)`, not primitives (as
-    /// Embree's SAH does for its Triangle4 leaves).
+    /// Embree's SAH does for its Triangle4 leaves). The AVX2 kernels, which test two
+    /// packets at once, build with blocks of `2 * leaf_block`.
     pub leaf_block: usize,
     /// Subtrees with more primitives than this are built in parallel.
     pub parallel_threshold: usize,

@@ -45,10 +45,14 @@ impl Tri4 {
 /// second packet a cache miss).
 #[inline(always)]
 pub(crate) fn prefetch_packets(packets: &[Tri4], first: u32, count: u32) {
+    // Leaves hold at most two packets unless the build was forced (`MAX_DEPTH`).
     let start = packets.as_ptr().wrapping_add(first as usize) as usize;
-    let end = start + count as usize * std::mem::size_of::<Tri4>();
-    let lines = (end - 1) / 64 - start / 64 + 1;
-    crate::wide::prefetch((start & !63) as *const u8, lines.min(8));
+    let last = start + count.min(2) as usize * std::mem::size_of::<Tri4>() - 1;
+    let mut line = start & !63;
+    while line <= last {
+        crate::wide::prefetch(line as *const u8, 1);
+        line += 64;
+    }
 }
 
 /// A ray prepared for [`Tri4`] tests: the watertight constants plus, computed once per ray

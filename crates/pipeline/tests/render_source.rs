@@ -201,3 +201,30 @@ fn first_hit_is_the_geometry_of_the_eye_ray_without_its_light() {
     }
     assert!(misses < w * h * 2, "the test needs hits");
 }
+
+#[test]
+fn filtered_frames_do_not_depend_on_the_thread_count() {
+    // The whole frame (guide pass, filter, lookup at 2 spp) with 1, 2 and 3 threads.
+    // Not the guided filter: `filtrace-denoise`'s box sums cut the image into bands by
+    // `rayon::current_num_threads()` (`boxsum::band_rows`), each band restarting its running
+    // sums, so its rounding follows the thread count (about 1e-8 relative at 512², seen with
+    // `filtrace render --filter guided --threads 1` vs `--threads 2`).
+    let (w, h) = (40, 30);
+    let src = RenderSource::new(renderer(w, h, 3, 21));
+    let st = PipelineSettings { seed: 21, spp: 2, ..PipelineSettings::paper(w, h) };
+    for name in ["none", "atrous", "bilateral"] {
+        let frame_with = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let f = filter_by_name(name, Some(src.scene_scale())).unwrap();
+                let mut p = FilteredRenderer::new(&src, f, st.clone()).unwrap();
+                p.render_frame().unwrap().clone()
+            })
+        };
+        let one = frame_with(1);
+        assert!(one.images.filtered_map.mean()[0] > 0.0, "the test needs indirect light");
+        for threads in [2, 3] {
+            assert_frames_identical(&frame_with(threads), &one, &format!("{name}, {threads} threads"));
+        }
+    }
+}

@@ -9,16 +9,20 @@
 //! produced on the fly by a closure (e.g. products `m I_a I_b`), never stored as images.
 //!
 //! Bands run in parallel; each starts by summing its first window directly (cost `2r+1`
-//! rows), the price of independence between bands.
+//! rows), the price of independence between bands. A band's running sums round differently
+//! from a sum carried over from the band above, so the band height depends only on the
+//! image and the radius, never on the thread count: the same input gives the same bits on
+//! any number of threads.
 
 use crate::simd::Isa;
 use rayon::prelude::*;
 
-/// Rows per parallel band: at least 64 (so the `2r+1` start-up rows stay a small share),
-/// else about two bands per thread.
-fn band_rows(h: usize) -> usize {
-    let threads = rayon::current_num_threads().max(1);
-    h.div_ceil(2 * threads).max(64)
+/// Rows per parallel band: four window heights, at least 64, so that the `2r+1` start-up
+/// rows of a band cost at most about an eighth of its sliding work (the start-up adds
+/// `2r+1` rows where sliding adds and subtracts two per row). Independent of the thread
+/// count (see the module note); a 1080-row image at r = 32 has 5 bands.
+fn band_rows(h: usize, r: usize) -> usize {
+    (4 * (2 * r + 1)).max(64).min(h.max(1))
 }
 
 /// The per-pixel quantities of a box pass and what to do with their window sums.
@@ -164,7 +168,7 @@ pub(crate) fn box_sums<const K: usize, B: BoxPass<K>>(
     if w == 0 || h == 0 {
         return;
     }
-    let rows = band_rows(h);
+    let rows = band_rows(h, r);
     let isa = crate::simd::isa();
     out.par_chunks_mut(rows * w * out_stride).enumerate().for_each(|(b, chunk)| {
         #[cfg(target_arch = "x86_64")]
@@ -225,5 +229,33 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The band split does not follow the thread count, so the sums are bit-identical on
+    /// 1, 2 and 3 threads (here several bands: h = 300, r = 5 gives 64-row bands).
+    #[test]
+    fn box_sums_bit_identical_across_thread_counts() {
+        let (w, h, r) = (37, 300, 5);
+        let data: Vec<[f32; 1]> = (0..w * h).map(|i| [((i * 7919) % 1000) as f32 * 0.001 + 0.1]).collect();
+        struct Copy<'a>(&'a [[f32; 1]], usize);
+        impl BoxPass<1> for Copy<'_> {
+            fn quantities(&self, x: usize, y: usize) -> [f32; 1] {
+                self.0[y * self.1 + x]
+            }
+            fn consume(&self, _: usize, _: usize, sums: &[[f32; 1]], out_row: &mut [f32]) {
+                for (o, s) in out_row.iter_mut().zip(sums) {
+                    *o = s[0];
+                }
+            }
+        }
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let mut out = vec![0.0f32; w * h];
+            pool.install(|| box_sums::<1, _>(w, h, r, &mut out, 1, &Copy(&data, w)));
+            out.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        };
+        let one = run(1);
+        assert_eq!(one, run(2));
+        assert_eq!(one, run(3));
     }
 }

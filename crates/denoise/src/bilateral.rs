@@ -119,7 +119,7 @@ pub fn bilateral_into(
     g.require_position(params.sigma_position)?;
     let (src, valid) = to_planes(color);
     let src = if valid.contains(&0.0) {
-        crate::atrous::inpaint_invalid(&src, &valid, color.width(), color.height())
+        crate::atrous::inpaint_invalid(&src, &valid, color.width(), color.height(), color.width())
     } else {
         src
     };

@@ -116,22 +116,40 @@ pub(crate) type Planes3 = [Buf; 3];
 /// Splits an interleaved 3-channel image into planes, replacing non-finite values by 0.
 /// Returns the planes and a validity plane (1 where all three values were finite).
 pub(crate) fn to_planes(im: &Image) -> (Planes3, Buf) {
-    let n = im.pixel_count();
+    to_planes_strided(im, im.width())
+}
+
+/// [`to_planes`] into planes of `stride >= width` values per row (padding: 0, invalid).
+pub(crate) fn to_planes_strided(im: &Image, stride: usize) -> (Planes3, Buf) {
+    let (w, h) = (im.width(), im.height());
+    debug_assert!(stride >= w);
+    let n = stride * h;
     let mut p = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
     let mut valid = Buf::uninit(n);
+    if n == 0 {
+        return (p, valid);
+    }
     let [p0, p1, p2] = &mut p;
-    p0.par_chunks_mut(PAR_CHUNK)
-        .zip(p1.par_chunks_mut(PAR_CHUNK))
-        .zip(p2.par_chunks_mut(PAR_CHUNK))
-        .zip(valid.par_chunks_mut(PAR_CHUNK))
-        .zip(im.data().par_chunks(3 * PAR_CHUNK))
+    // One work item per PAR_CHUNK pixels (whole rows).
+    let rows = (PAR_CHUNK / w.max(1)).max(1);
+    p0.par_chunks_mut(rows * stride)
+        .zip(p1.par_chunks_mut(rows * stride))
+        .zip(p2.par_chunks_mut(rows * stride))
+        .zip(valid.par_chunks_mut(rows * stride))
+        .zip(im.data().par_chunks(3 * w * rows))
         .for_each(|((((a, b), c), v), src)| {
-            for (i, px) in src.chunks_exact(3).enumerate() {
-                let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                a[i] = if ok { px[0] } else { 0.0 };
-                b[i] = if ok { px[1] } else { 0.0 };
-                c[i] = if ok { px[2] } else { 0.0 };
-                v[i] = if ok { 1.0 } else { 0.0 };
+            for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                let o = r * stride;
+                for (i, px) in src.chunks_exact(3).enumerate() {
+                    let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+                    a[o + i] = if ok { px[0] } else { 0.0 };
+                    b[o + i] = if ok { px[1] } else { 0.0 };
+                    c[o + i] = if ok { px[2] } else { 0.0 };
+                    v[o + i] = if ok { 1.0 } else { 0.0 };
+                }
+                for pl in [&mut *a, &mut *b, &mut *c, &mut *v] {
+                    pl[o + w..o + stride].fill(0.0);
+                }
             }
         });
     (p, valid)
@@ -139,12 +157,24 @@ pub(crate) fn to_planes(im: &Image) -> (Planes3, Buf) {
 
 /// Interleaves three planes into `out` (3 channels, same pixel count).
 pub(crate) fn from_planes(p: &Planes3, out: &mut Image) {
-    out.data_mut().par_chunks_mut(3 * PAR_CHUNK).enumerate().for_each(|(k, dst)| {
-        let o = k * PAR_CHUNK;
-        for (i, px) in dst.chunks_exact_mut(3).enumerate() {
-            px[0] = p[0][o + i];
-            px[1] = p[1][o + i];
-            px[2] = p[2][o + i];
+    from_planes_strided(p, out.width(), out)
+}
+
+/// [`from_planes`] from planes of `stride` values per row.
+pub(crate) fn from_planes_strided(p: &Planes3, stride: usize, out: &mut Image) {
+    let w = out.width();
+    if w == 0 {
+        return;
+    }
+    let rows = (PAR_CHUNK / w).max(1);
+    out.data_mut().par_chunks_mut(3 * w * rows).enumerate().for_each(|(k, dst)| {
+        for (r, dst) in dst.chunks_exact_mut(3 * w).enumerate() {
+            let o = (k * rows + r) * stride;
+            for (i, px) in dst.chunks_exact_mut(3).enumerate() {
+                px[0] = p[0][o + i];
+                px[1] = p[1][o + i];
+                px[2] = p[2][o + i];
+            }
         }
     });
 }
@@ -153,6 +183,8 @@ pub(crate) fn from_planes(p: &Planes3, out: &mut Image) {
 pub(crate) struct Guides {
     pub width: usize,
     pub height: usize,
+    /// Values per row of every plane (`width` unless built by [`Guides::new_strided`]).
+    pub stride: usize,
     /// Unit normals (zero on background).
     pub normal: Planes3,
     /// Positions divided by the scene scale, or `[depth / scale, 0, 0]` when only depth is
@@ -178,35 +210,62 @@ impl Guides {
     }
 
     pub fn new(g: &GBuffer, width: usize, height: usize) -> Result<Self, DenoiseError> {
+        Self::new_strided(g, width, height, width)
+    }
+
+    /// [`Guides::new`] with planes of `stride >= width` values per row; the padding columns
+    /// are background (normal 0, surface 0, position/depth 0).
+    pub fn new_strided(
+        g: &GBuffer,
+        width: usize,
+        height: usize,
+        stride: usize,
+    ) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
-        let n = width * height;
+        debug_assert!(stride >= width);
+        let n = stride * height;
+        let w = width.max(1);
+        // Whole rows per work item, about PAR_CHUNK pixels.
+        let rows = (PAR_CHUNK / w).max(1);
         let mut normal = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
         let mut surface = Buf::uninit(n);
         let [n0, n1, n2] = &mut normal;
-        n0.par_chunks_mut(PAR_CHUNK)
-            .zip(n1.par_chunks_mut(PAR_CHUNK))
-            .zip(n2.par_chunks_mut(PAR_CHUNK))
-            .zip(surface.par_chunks_mut(PAR_CHUNK))
-            .zip(g.normal.data().par_chunks(3 * PAR_CHUNK))
-            .for_each(|((((a, b), c), s), src)| {
-                for (i, px) in src.chunks_exact(3).enumerate() {
-                    let ok = is_surface(px);
-                    let inv =
-                        if ok { 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt() } else { 0.0 };
-                    a[i] = px[0] * inv;
-                    b[i] = px[1] * inv;
-                    c[i] = px[2] * inv;
-                    s[i] = if ok { 1.0 } else { 0.0 };
-                }
-            });
+        if n > 0 {
+            n0.par_chunks_mut(rows * stride)
+                .zip(n1.par_chunks_mut(rows * stride))
+                .zip(n2.par_chunks_mut(rows * stride))
+                .zip(surface.par_chunks_mut(rows * stride))
+                .zip(g.normal.data().par_chunks(3 * w * rows))
+                .for_each(|((((a, b), c), s), src)| {
+                    for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                        let o = r * stride;
+                        for (i, px) in src.chunks_exact(3).enumerate() {
+                            let ok = is_surface(px);
+                            let inv = if ok {
+                                1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt()
+                            } else {
+                                0.0
+                            };
+                            a[o + i] = px[0] * inv;
+                            b[o + i] = px[1] * inv;
+                            c[o + i] = px[2] * inv;
+                            s[o + i] = if ok { 1.0 } else { 0.0 };
+                        }
+                        for pl in [&mut *a, &mut *b, &mut *c, &mut *s] {
+                            pl[o + width..o + stride].fill(0.0);
+                        }
+                    }
+                });
+        }
+        let surface_px = |i: usize| is_surface(&g.normal.data()[3 * i..3 * i + 3]);
         let depth = g.depth.as_ref().map(|d| {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let m = d
                     .data()
                     .iter()
-                    .zip(surface.iter())
-                    .filter(|(v, s)| **s > 0.0 && v.is_finite())
-                    .fold(0.0f32, |m, (v, _)| m.max(v.abs()));
+                    .enumerate()
+                    .filter(|(i, v)| surface_px(*i) && v.is_finite())
+                    .fold(0.0f32, |m, (_, v)| m.max(v.abs()));
                 if m > 0.0 {
                     m
                 } else {
@@ -214,17 +273,22 @@ impl Guides {
                 }
             });
             let mut b = Buf::uninit(n);
-            b.par_iter_mut()
-                .zip(d.data().par_iter())
-                .for_each(|(o, v)| *o = if v.is_finite() { v / scale } else { 0.0 });
+            if n > 0 {
+                b.par_chunks_mut(stride).zip(d.data().par_chunks(w)).for_each(|(o, src)| {
+                    for (o, v) in o.iter_mut().zip(src) {
+                        *o = if v.is_finite() { v / scale } else { 0.0 };
+                    }
+                    o[width..].fill(0.0);
+                });
+            }
             b
         });
         let position = if let Some(p) = &g.position {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let mut lo = [f32::INFINITY; 3];
                 let mut hi = [f32::NEG_INFINITY; 3];
-                for (px, s) in p.data().chunks_exact(3).zip(surface.iter()) {
-                    if *s > 0.0 && px.iter().all(|v| v.is_finite()) {
+                for (i, px) in p.data().chunks_exact(3).enumerate() {
+                    if surface_px(i) && px.iter().all(|v| v.is_finite()) {
                         for k in 0..3 {
                             lo[k] = lo[k].min(px[k]);
                             hi[k] = hi[k].max(px[k]);
@@ -242,22 +306,30 @@ impl Guides {
             let mut planes = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
             let [a, b, c] = &mut planes;
             // Background keeps its (finite) positions: it is only ever compared with background.
-            a.par_chunks_mut(PAR_CHUNK)
-                .zip(b.par_chunks_mut(PAR_CHUNK))
-                .zip(c.par_chunks_mut(PAR_CHUNK))
-                .zip(p.data().par_chunks(3 * PAR_CHUNK))
-                .for_each(|(((a, b), c), src)| {
-                    for (i, px) in src.chunks_exact(3).enumerate() {
-                        let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                        a[i] = if ok { px[0] / scale } else { 0.0 };
-                        b[i] = if ok { px[1] / scale } else { 0.0 };
-                        c[i] = if ok { px[2] / scale } else { 0.0 };
-                    }
-                });
+            if n > 0 {
+                a.par_chunks_mut(rows * stride)
+                    .zip(b.par_chunks_mut(rows * stride))
+                    .zip(c.par_chunks_mut(rows * stride))
+                    .zip(p.data().par_chunks(3 * w * rows))
+                    .for_each(|(((a, b), c), src)| {
+                        for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                            let o = r * stride;
+                            for (i, px) in src.chunks_exact(3).enumerate() {
+                                let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+                                a[o + i] = if ok { px[0] / scale } else { 0.0 };
+                                b[o + i] = if ok { px[1] / scale } else { 0.0 };
+                                c[o + i] = if ok { px[2] / scale } else { 0.0 };
+                            }
+                            for pl in [&mut *a, &mut *b, &mut *c] {
+                                pl[o + width..o + stride].fill(0.0);
+                            }
+                        }
+                    });
+            }
             Some(planes)
         } else {
             depth.as_ref().map(|d| [d.clone(), Buf::zeros(n), Buf::zeros(n)])
         };
-        Ok(Self { width, height, normal, position, depth, surface })
+        Ok(Self { width, height, stride, normal, position, depth, surface })
     }
 }

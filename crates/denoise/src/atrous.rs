@@ -177,7 +177,7 @@ pub fn atrous_into(
 /// (bench filters-like input, 1 thread).
 fn level_stride(width: usize) -> usize {
     let s = width.div_ceil(16) * 16;
-    if (s / 16) % 2 == 0 {
+    if (s / 16) & 1 == 0 {
         s + 16
     } else {
         s

@@ -441,7 +441,13 @@ fn chi2_sample_li_thorough() {
     };
     let mut failures = Vec::new();
     for (k, p) in points.into_iter().enumerate() {
-        let mut rng = Rng::new(81 + k as u64);
+        // Seeds 91..: with 81.. the third point failed by chance (p = 2.5e-3 against the
+        // Šidák threshold 3.3e-3) once light selection became an alias table, which maps
+        // `u_select` differently. A scan of seeds 83..88 at that point gave p = 2.5e-3, 0.14,
+        // 0.81, 0.37, 0.20, 0.51 with the alias table and 0.094, 0.084, 0.24, 0.010, 0.50,
+        // 0.66 with the old CDF search: no systematic difference, so new seeds were drawn
+        // (once, untried) rather than the threshold loosened.
+        let mut rng = Rng::new(91 + k as u64);
         let res = chi2_sphere(
             &params,
             points.len(),

@@ -9,7 +9,6 @@
 //! [`super::path`].
 
 use super::{CameraSample, PathContext, PathParams, Split, VertexSamples};
-use crate::bsdf::SurfaceBsdf;
 use crate::film::VisibleSurface;
 use crate::integrator::path::visible_surface;
 use filtrace_core::sampler::Sampler;
@@ -41,8 +40,7 @@ pub fn li(
             break;
         }
         // Sample the BSDF (same slots as the NEE integrator's BSDF sample).
-        let material = &ctx.scene.materials[si.material as usize];
-        let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
+        let bsdf = ctx.bsdf(&si);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
         let u = VertexSamples::draw(sampler, vertex, bsdf.has_lobe_choice());

@@ -18,6 +18,7 @@
 pub mod bsdf_only;
 pub mod path;
 
+use crate::bsdf::SurfaceBsdf;
 use crate::film::{PixelSample, VisibleSurface};
 use crate::lights::LightSet;
 use crate::surface::{SceneGeometry, SurfaceInteraction};
@@ -85,6 +86,12 @@ impl<'a> PathContext<'a> {
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
         SurfaceInteraction::from_hit(self.scene, self.geometry, ray, &hit)
+    }
+
+    /// The BSDF at `si` (textures evaluated at `si.uv`; pbrt's `GetBSDF`).
+    #[inline]
+    pub fn bsdf(&self, si: &SurfaceInteraction) -> SurfaceBsdf {
+        self.geometry.bsdf(self.scene, si.material, si.uv)
     }
 
     /// Emitted radiance leaving the surface towards `si.wo`: the material's emission on the

@@ -54,8 +54,7 @@ pub fn li(
 /// The G-buffer record of a first hit: BSDF albedo, shading normal facing the camera,
 /// position, distance from the eye.
 pub fn visible_surface(ctx: &PathContext, si: &SurfaceInteraction) -> VisibleSurface {
-    let m = &ctx.scene.materials[si.material as usize];
-    let bsdf = SurfaceBsdf::from_material(&m.bsdf, &ctx.scene.textures, si.uv);
+    let bsdf = ctx.bsdf(si);
     VisibleSurface { albedo: bsdf.albedo(), normal: si.n_s, position: si.p, depth: si.t }
 }
 
@@ -99,8 +98,7 @@ pub fn trace_from_hit(
         }
 
         // The BSDF at the vertex, in the shading frame on the side of wo.
-        let material = &ctx.scene.materials[si.material as usize];
-        let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
+        let bsdf = ctx.bsdf(&si);
         let frame = Frame::from_z(si.n_s);
         let wo = frame.to_local(si.wo);
         let u = VertexSamples::draw(sampler, vertex, bsdf.has_lobe_choice());
@@ -186,8 +184,7 @@ fn sample_one_light(
 /// slots of vertex 0, so with the same sampler it equals the direct light that
 /// [`trace_from_hit`] computes at its first hit.
 pub fn direct_light(ctx: &PathContext, si: &SurfaceInteraction, sampler: &mut Sampler) -> Rgb {
-    let material = &ctx.scene.materials[si.material as usize];
-    let bsdf = SurfaceBsdf::from_material(&material.bsdf, &ctx.scene.textures, si.uv);
+    let bsdf = ctx.bsdf(si);
     let frame = Frame::from_z(si.n_s);
     let wo = frame.to_local(si.wo);
     let u = VertexSamples::draw(sampler, 0, bsdf.has_lobe_choice());

@@ -22,8 +22,17 @@
 //! will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
 //! at a time with the **watertight** algorithm of Woop, Benthin and Wald (JCGT 2013,
 //! [`triangle`]), so rays through shared edges and vertices of closed meshes never slip
-//! through. Measurements against Embree 4: `docs/perf-accel.md` (parity on the 270k
-//! stand-in mesh for incoherent closest hits, 0.84-0.97 on the bunny and the engine).
+//! through.
+//!
+//! On CPUs with AVX2 and FMA (detected at run time, [`Simd::best`]; no build flag) the
+//! bottom levels are collapsed to **8-wide nodes** instead, tested with one AVX2 slab
+//! test, and leaves are tested two packets (eight triangles) at a time, bit-identical to
+//! the scalar test (`avx2.rs`). The SSE BVH4 stays as the path for other CPUs;
+//! [`SceneAccel::build_simd`] picks either kernel explicitly (tests run both). Bottom
+//! levels of at most [`BuildParams::max_flat_triangles`] triangles (the Cornell box) get
+//! no hierarchy: every query tests all their packets after one bounds check.
+//! Measurements against Embree 4: `docs/perf-accel.md` (1 thread, incoherent closest
+//! hits: 1.07x Embree on the 270k sphere, 0.97-1.01x on the bunny).
 //!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
 //! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and

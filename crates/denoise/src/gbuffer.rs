@@ -210,16 +210,18 @@ impl Guides {
     }
 
     pub fn new(g: &GBuffer, width: usize, height: usize) -> Result<Self, DenoiseError> {
-        Self::new_strided(g, width, height, width)
+        Self::new_strided(g, width, height, width, true)
     }
 
     /// [`Guides::new`] with planes of `stride >= width` values per row; the padding columns
-    /// are background (normal 0, surface 0, position/depth 0).
+    /// are background (normal 0, surface 0, position/depth 0). Without `keep_depth` the depth
+    /// plane is made only when it stands in for an absent position.
     pub fn new_strided(
         g: &GBuffer,
         width: usize,
         height: usize,
         stride: usize,
+        keep_depth: bool,
     ) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
         debug_assert!(stride >= width);
@@ -258,7 +260,8 @@ impl Guides {
                 });
         }
         let surface_px = |i: usize| is_surface(&g.normal.data()[3 * i..3 * i + 3]);
-        let depth = g.depth.as_ref().map(|d| {
+        // The depth plane is only needed by filters that use it, or as the position.
+        let depth = g.depth.as_ref().filter(|_| keep_depth || g.position.is_none()).map(|d| {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let m = d
                     .data()

@@ -213,6 +213,23 @@ fn symmetric_level_matches_direct_pass() {
     }
 }
 
+/// The band split depends on the thread count; the result must not (bit-identical).
+#[test]
+fn atrous_is_identical_for_any_thread_count() {
+    let mut rng = Rng::new(12);
+    let (w, h) = (83, 140);
+    let g = random_gbuffer(w, h, &mut rng, true);
+    let color = random_color(w, h, &mut rng);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| atrous(&color, &g, &AtrousParams::paper()).unwrap())
+    };
+    let one = run(1);
+    for threads in [2, 3, 7] {
+        assert!(one.data() == run(threads).data(), "{threads} threads differ from 1");
+    }
+}
+
 #[test]
 fn bilateral_matches_naive() {
     let mut rng = Rng::new(2);

@@ -54,6 +54,8 @@ pub struct RayBenchReport {
     pub triangles: usize,
     /// Size of the rayon pool the rays were cast on.
     pub threads: usize,
+    /// SIMD kernels of the bottom levels (`"Sse"` or `"Avx2"`, see [`crate::Simd`]).
+    pub kernel: String,
     pub build_s: f64,
     pub primary_rays: usize,
     pub incoherent_rays: usize,
@@ -77,8 +79,8 @@ impl RayBenchReport {
         let t = self.threads.max(1) as f64;
         let mut s = String::new();
         s.push_str(&format!(
-            "scene `{}`: {} triangles, build {:.3} s, {} thread(s)\n\n",
-            self.scene, self.triangles, self.build_s, self.threads
+            "scene `{}`: {} triangles, build {:.3} s, {} thread(s), {} kernels\n\n",
+            self.scene, self.triangles, self.build_s, self.threads, self.kernel
         ));
         s.push_str("| query | rays | hit fraction | Mrays/s | Mrays/s per thread | Mrays per CPU-s |\n");
         s.push_str("|---|---:|---:|---:|---:|---:|\n");
@@ -232,6 +234,7 @@ pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
         scene: scene.name.clone(),
         triangles: accel.triangle_count(),
         threads: rayon::current_num_threads(),
+        kernel: format!("{:?}", accel.simd()),
         build_s,
         primary_rays: primary.len(),
         incoherent_rays: incoherent.len(),

@@ -14,6 +14,7 @@ fn ray_bench_reports_consistent_numbers() {
     assert_eq!(r.primary_rays, opts.width * opts.height);
     assert_eq!(r.incoherent_rays, opts.rays);
     assert!(r.threads >= 1);
+    assert_eq!(r.kernel, format!("{:?}", filtrace_accel::Simd::best()));
     for m in [r.primary_closest_mrays, r.incoherent_closest_mrays, r.incoherent_any_mrays] {
         assert!(m.is_finite() && m > 0.0);
     }

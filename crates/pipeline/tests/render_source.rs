@@ -204,19 +204,21 @@ fn first_hit_is_the_geometry_of_the_eye_ray_without_its_light() {
 
 #[test]
 fn filtered_frames_do_not_depend_on_the_thread_count() {
-    // The whole frame (guide pass, filter, lookup at 2 spp) with 1, 2 and 3 threads.
-    // Not the guided filter: `filtrace-denoise`'s box sums cut the image into bands by
-    // `rayon::current_num_threads()` (`boxsum::band_rows`), each band restarting its running
-    // sums, so its rounding follows the thread count (about 1e-8 relative at 512², seen with
-    // `filtrace render --filter guided --threads 1` vs `--threads 2`).
-    let (w, h) = (40, 30);
+    // The whole frame (guide pass, filter, lookup at 2 spp) with 1, 2 and 3 threads, for
+    // every filter. Tall enough, with a small radius, for the guided filter's box sums to
+    // run in several bands of rows (which once were sized by the thread count, changing
+    // the rounding by ~1e-8; fixed in commit 9744f4a).
+    let (w, h) = (24, 160);
     let src = RenderSource::new(renderer(w, h, 3, 21));
     let st = PipelineSettings { seed: 21, spp: 2, ..PipelineSettings::paper(w, h) };
-    for name in ["none", "atrous", "bilateral"] {
+    for name in ["none", "atrous", "guided", "bilateral"] {
         let frame_with = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
-                let f = filter_by_name(name, Some(src.scene_scale())).unwrap();
+                let radius = (name == "guided" || name == "bilateral").then_some(3);
+                let f = FilterChoice { radius, ..FilterChoice::named(name) }
+                    .build(Some(src.scene_scale()))
+                    .unwrap();
                 let mut p = FilteredRenderer::new(&src, f, st.clone()).unwrap();
                 p.render_frame().unwrap().clone()
             })

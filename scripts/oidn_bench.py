@@ -24,6 +24,7 @@ import sys
 import time
 
 import numpy as np
+from importlib.metadata import version as _version
 
 
 def synthetic_input(w, h, seed=0x2545F491):
@@ -115,7 +116,7 @@ def main():
     if not np.isfinite(output).all():
         sys.exit("OIDN output has non-finite values")
     res = {
-        "oidn_version": pyoidn.__dict__.get("__version__", "2.x"),
+        "pyoidn_version": _version("pyoidn"),
         "res": [w, h],
         "quality": a.quality,
         "aux": not a.no_aux,

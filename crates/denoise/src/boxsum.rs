@@ -17,12 +17,15 @@
 use crate::simd::Isa;
 use rayon::prelude::*;
 
-/// Rows per parallel band: four window heights, at least 64, so that the `2r+1` start-up
+/// Rows per parallel band: at least four window heights and 64 rows, so that the `2r+1` start-up
 /// rows of a band cost at most about an eighth of its sliding work (the start-up adds
 /// `2r+1` rows where sliding adds and subtracts two per row). Independent of the thread
-/// count (see the module note); a 1080-row image at r = 32 has 5 bands.
+/// count (see the module note); a 1080-row image at r = 32 has 4 bands.
 fn band_rows(h: usize, r: usize) -> usize {
-    (4 * (2 * r + 1)).max(64).min(h.max(1))
+    // Equal bands (as many as fit at that height), so 2 threads stay balanced: 512 rows at
+    // r = 24 give 2 bands of 256, not 196 + 196 + 120.
+    let bands = (h / (4 * (2 * r + 1)).max(64)).max(1);
+    h.div_ceil(bands).max(1)
 }
 
 /// The per-pixel quantities of a box pass and what to do with their window sums.

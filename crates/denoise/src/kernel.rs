@@ -173,15 +173,16 @@ struct BlockArgs<'a> {
     inv: [f32; 3],
 }
 
+/// `s[i..i + B]` as an array (bounds-checked); shared with the symmetric À-Trous pass.
 #[inline(always)]
-fn ld<const B: usize>(s: &[f32], i: usize) -> [f32; B] {
+pub(crate) fn ld<const B: usize>(s: &[f32], i: usize) -> [f32; B] {
     let mut r = [0.0f32; B];
     r.copy_from_slice(&s[i..i + B]);
     r
 }
 
 #[inline(always)]
-fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
+pub(crate) fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
     [ld::<B>(s[0], i), ld::<B>(s[1], i), ld::<B>(s[2], i)]
 }
 

@@ -24,7 +24,7 @@
 //! bit-identical, within float rounding). Every pixel's result is independent of the band
 //! split, so results do not depend on the thread count.
 
-use crate::kernel::RangeTerms;
+use crate::kernel::{ld, ld3, RangeTerms};
 use crate::simd::{isa, madd, scaled_exp_neg, Isa};
 use rayon::prelude::*;
 
@@ -84,18 +84,6 @@ impl Level {
     fn ring_row(&self, k: usize, y: usize) -> usize {
         (k * self.ring_rows + (y / self.step) % self.ring_rows) * self.ring_width
     }
-}
-
-#[inline(always)]
-fn ld<const B: usize>(s: &[f32], i: usize) -> [f32; B] {
-    let mut r = [0.0f32; B];
-    r.copy_from_slice(&s[i..i + B]);
-    r
-}
-
-#[inline(always)]
-fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
-    [ld::<B>(s[0], i), ld::<B>(s[1], i), ld::<B>(s[2], i)]
 }
 
 /// `s[i..i + B]` without the bounds check, for the interior loops whose index ranges are

@@ -53,11 +53,10 @@ pub fn sobol_dim0(index: u32) -> u32 {
     index.reverse_bits()
 }
 
-/// Byte tables of Sobol dimension 1: `SOBOL_DIM1_BYTES[k][b]` is the XOR of the generator
-/// columns selected by byte `k` of the index holding the value `b`. Four lookups replace a
-/// loop over 32 bits (the shuffled indices use all 32): the sampler's share of the Cornell
-/// box profile fell from 33% to under 2% (perf, docs/perf-render.md).
-const SOBOL_DIM1_BYTES: [[u32; 256]; 4] = {
+/// Byte tables of a map linear over GF(2) with generator columns `cols`: `t[k][b]` is the
+/// XOR of the columns selected by byte `k` of an index holding the value `b`, so four
+/// lookups replace a loop over 32 bits.
+const fn byte_tables(cols: [u32; 32]) -> [[u32; 256]; 4] {
     let mut t = [[0u32; 256]; 4];
     let mut k = 0;
     while k < 4 {
@@ -67,7 +66,7 @@ const SOBOL_DIM1_BYTES: [[u32; 256]; 4] = {
             let mut bit = 0;
             while bit < 8 {
                 if b & (1 << bit) != 0 {
-                    x ^= SOBOL_DIM1[8 * k + bit];
+                    x ^= cols[8 * k + bit];
                 }
                 bit += 1;
             }
@@ -77,30 +76,23 @@ const SOBOL_DIM1_BYTES: [[u32; 256]; 4] = {
         k += 1;
     }
     t
-};
+}
+
+/// Byte tables of Sobol dimension 1 (the shuffled indices use all 32 bits): the sampler's
+/// share of the Cornell box profile fell from 33% to under 2% (perf, docs/perf-render.md).
+const SOBOL_DIM1_BYTES: [[u32; 256]; 4] = byte_tables(SOBOL_DIM1);
 
 /// Byte tables of the map `i_rev -> reverse(sobol_dim1(reverse(i_rev)))` (also linear over
-/// GF(2)), so that the sampler can work on bit-reversed indices and skip two reversals.
+/// GF(2): column `j` is column `31 - j` of dimension 1, reversed), so that the sampler can
+/// work on bit-reversed indices and skip two reversals.
 const SOBOL_DIM1_REV_BYTES: [[u32; 256]; 4] = {
-    let mut t = [[0u32; 256]; 4];
-    let mut k = 0;
-    while k < 4 {
-        let mut b = 0;
-        while b < 256 {
-            let mut x = 0u32;
-            let mut bit = 0;
-            while bit < 8 {
-                if b & (1 << bit) != 0 {
-                    x ^= SOBOL_DIM1[31 - (8 * k + bit)].reverse_bits();
-                }
-                bit += 1;
-            }
-            t[k][b] = x;
-            b += 1;
-        }
-        k += 1;
+    let mut cols = [0u32; 32];
+    let mut j = 0;
+    while j < 32 {
+        cols[j] = SOBOL_DIM1[31 - j].reverse_bits();
+        j += 1;
     }
-    t
+    byte_tables(cols)
 };
 
 /// `reverse(sobol_dim1(reverse(i_rev)))` by four table lookups.

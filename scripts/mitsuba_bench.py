@@ -66,8 +66,8 @@ def scene_dict(mi, files, spp, res):
         shape = {"type": "obj", "filename": path, "face_normals": True}
         if name in MATERIALS:
             shape["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": MATERIALS[name]}}
-        else:  # the light quad
-            shape["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": (0.78, 0.78, 0.78)}}
+        else:  # the light quad: Kd 0 as in cornell_box_lit.mtl
+            shape["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": (0.0, 0.0, 0.0)}}
             shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": LIGHT_RADIANCE}}
         shapes[name] = shape
     return {

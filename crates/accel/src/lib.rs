@@ -55,6 +55,7 @@
 mod avx2;
 pub mod bench;
 mod brute;
+mod packet;
 pub mod sah;
 pub mod testmesh;
 mod tri4;
@@ -62,6 +63,7 @@ pub mod triangle;
 mod wide;
 
 pub use brute::BruteForce;
+pub use packet::{HitPacket, RayPacket, LANES};
 pub use sah::BuildParams;
 
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};

@@ -20,7 +20,7 @@
 use crate::sah::MAX_DEPTH;
 use crate::tri4::{prefetch_packets, test4_scalar, Tri4};
 use crate::triangle::WatertightRay;
-use crate::wide::{prefetch, Entry, Leaves, Node8, FAR_SCALE};
+use crate::wide::{cull_bound, prefetch, Entry, Leaves, Node8, FAR_SCALE};
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
@@ -96,7 +96,7 @@ unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m
     // go first (NaN cannot occur with finite reciprocals and boxes, but an empty slot's
     // infinite bounds give `±inf`, which fails the comparison as it should).
     let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
-    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(t_max))));
+    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(cull_bound(t_max)))));
     let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32;
     (mask, t_near)
@@ -210,7 +210,7 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
             sp -= 1;
             // SAFETY: entries below `sp` were written before `sp` was raised past them.
             let e = unsafe { stack[sp].assume_init() };
-            if e.t <= *t_max {
+            if e.t <= cull_bound(*t_max) {
                 cur = e;
                 break;
             }
@@ -393,17 +393,26 @@ fn edge_fallback(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Lanes 
 }
 
 /// Closest hit among `packets` with `t` in `[t_min, t_max]`: `(t, u, v, 4 packet +
-/// lane)` relative to the slice. Packets are tested in pairs; each lane keeps its nearest
-/// hit in registers (no branch per pair), and one horizontal minimum at the end picks
-/// the lane (on equal `t`, the lowest lane, then the first pair).
+/// lane)` relative to the slice, `ids` the primitive ids of the slice's lanes. Packets
+/// are tested in pairs; each lane keeps its nearest hit in registers (no branch per
+/// pair), and one horizontal minimum at the end picks the lane. Equal `t` in two places
+/// (rare: shared edges, coincident triangles) sends the leaf to [`closest_exact`], which
+/// applies the tie rule (smallest id) of the other kernels.
 #[inline(always)]
-pub(crate) unsafe fn closest_in(r: &Ray8, packets: &[Tri4], t_max: f32) -> Option<(f32, f32, f32, usize)> {
+pub(crate) unsafe fn closest_in(
+    r: &Ray8,
+    packets: &[Tri4],
+    ids: &[u32],
+    t_max: f32,
+) -> Option<(f32, f32, f32, usize)> {
     let inf = _mm256_set1_ps(f32::INFINITY);
     let (mut bt, mut bu, mut bv) = (inf, _mm256_setzero_ps(), _mm256_setzero_ps());
     let mut bp = _mm256_set1_epi32(-1);
+    let mut ties = _mm256_setzero_ps();
     for (j, pair) in packets.chunks(2).enumerate() {
         let (b, lanes) = if pair.len() == 2 { (&pair[1], 0xff) } else { (&pair[0], 0x0f) };
         let l = test8v(r, &pair[0], b, lanes, t_max);
+        ties = _mm256_or_ps(ties, _mm256_and_ps(l.hit, _mm256_cmp_ps::<_CMP_EQ_OQ>(l.t, bt)));
         let closer = _mm256_and_ps(l.hit, _mm256_cmp_ps::<_CMP_LT_OQ>(l.t, bt));
         bt = _mm256_blendv_ps(bt, l.t, closer);
         bu = _mm256_blendv_ps(bu, l.u, closer);
@@ -422,8 +431,11 @@ pub(crate) unsafe fn closest_in(r: &Ray8, packets: &[Tri4], t_max: f32) -> Optio
     let m = _mm256_min_ps(bt, _mm256_permute2f128_ps::<1>(bt, bt));
     let m = _mm256_min_ps(m, _mm256_permute_ps::<0b01_00_11_10>(m));
     let m = _mm256_min_ps(m, _mm256_permute_ps::<0b10_11_00_01>(m));
-    let lane =
-        (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(bt, m)) as u32 & hit).trailing_zeros() as usize;
+    let at_min = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(bt, m)) as u32 & hit;
+    if at_min & (at_min - 1) != 0 || _mm256_movemask_ps(ties) != 0 {
+        return closest_exact(r, packets, ids, t_max);
+    }
+    let lane = at_min.trailing_zeros() as usize;
     let (mut t, mut u, mut v, mut p) = (Lanes8([0.0; 8]), Lanes8([0.0; 8]), Lanes8([0.0; 8]), [0i32; 8]);
     // SAFETY: `Lanes8` is 32-byte aligned; `p` is written with an unaligned store.
     unsafe {
@@ -433,6 +445,23 @@ pub(crate) unsafe fn closest_in(r: &Ray8, packets: &[Tri4], t_max: f32) -> Optio
         _mm256_storeu_si256(p.as_mut_ptr() as *mut __m256i, bp);
     }
     Some((t.0[lane], u.0[lane], v.0[lane], 4 * 2 * p[lane] as usize + lane))
+}
+
+/// [`closest_in`] by the scalar test (bit-identical lanes), keeping the smallest id among
+/// equal `t`.
+#[inline(never)]
+fn closest_exact(r: &Ray8, packets: &[Tri4], ids: &[u32], t_max: f32) -> Option<(f32, f32, f32, usize)> {
+    let mut best: Option<(f32, f32, f32, usize)> = None;
+    for (p, packet) in packets.iter().enumerate() {
+        let (mask, t, u, v) = test4_scalar(r.ray, packet, r.t_min, t_max);
+        for l in (0..4).filter(|l| mask & (1 << l) != 0) {
+            let k = 4 * p + l;
+            if crate::closer(t[l], ids[k], best.map(|b| (b.0, ids[b.3]))) {
+                best = Some((t[l], u[l], v[l], k));
+            }
+        }
+    }
+    best
 }
 
 /// Closest-hit leaf test over packet pairs; `best` holds `(t, u, v, 4 packet + lane)`.
@@ -450,12 +479,15 @@ impl Leaves for &mut ClosestPairs<'_> {
     #[inline(always)]
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
         let leaf = &self.packets[first as usize..(first + count) as usize];
+        let ids = &self.prim_ids[4 * first as usize..4 * (first + count) as usize];
         // SAFETY: the AVX2 traversal runs only where `available()` (see `Simd`).
-        if let Some((t, u, v, i)) = unsafe { closest_in(&self.ray, leaf, *t_max) } {
-            *t_max = t;
+        if let Some((t, u, v, i)) = unsafe { closest_in(&self.ray, leaf, ids, *t_max) } {
             let k = 4 * first as usize + i;
-            prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
-            self.best = Some((t, u, v, k));
+            if crate::closer(t, self.prim_ids[k], self.best.map(|b| (b.0, self.prim_ids[b.3]))) {
+                *t_max = t;
+                prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
+                self.best = Some((t, u, v, k));
+            }
         }
         false
     }
@@ -617,8 +649,9 @@ mod tests {
             // The closest of the lanes, as the scalar test sees it.
             let packets = if n > 4 { vec![a, *b] } else { vec![a] };
             // SAFETY: checked `available()` above.
+            let ids: Vec<u32> = (0..4 * packets.len() as u32).collect();
             let closest =
-                unsafe { closest_in(&Ray8::new(&WatertightRay::new(o, d), t_min), &packets, t_max) };
+                unsafe { closest_in(&Ray8::new(&WatertightRay::new(o, d), t_min), &packets, &ids, t_max) };
             let best =
                 (0..8).filter(|l| slow.mask & (1 << l) != 0).min_by(|&i, &j| slow.t[i].total_cmp(&slow.t[j]));
             match (closest, best) {

@@ -43,8 +43,12 @@ impl BruteForce {
             let wr = WatertightRay::new(o, d);
             for (p, tri) in tris.iter().enumerate() {
                 if let Some((t, u, v)) = intersect_watertight(&wr, tri, ray.t_min, t_max) {
-                    t_max = t;
-                    best = Some(Hit { t, u, v, instance: ii as u32, prim: p as u32 });
+                    // Strictly closer only: among equal `t` the first in `(instance, prim)`
+                    // order stays, the tie rule of the BVH (`SceneAccel::intersect`).
+                    if best.is_none_or(|b| t < b.t) {
+                        t_max = t;
+                        best = Some(Hit { t, u, v, instance: ii as u32, prim: p as u32 });
+                    }
                 }
             }
         }

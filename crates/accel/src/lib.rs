@@ -403,6 +403,20 @@ pub struct BvhStats {
     pub sah_cost: f64,
 }
 
+/// Whether a hit at `t` on primitive `id` replaces the best hit so far, `(t, id)`: a
+/// smaller `t`, or the same `t` and a smaller id. Every closest-hit kernel keeps its best
+/// hit with this rule (ids are mesh triangle indices, or `(instance, prim)` pairs in
+/// order), so that ties between triangles hit at the same distance (shared edges and
+/// vertices, coincident triangles) go to the same triangle whatever the traversal order,
+/// node width, SIMD kernel or ray packet.
+#[inline(always)]
+pub(crate) fn closer<I: PartialOrd>(t: f32, id: I, best: Option<(f32, I)>) -> bool {
+    match best {
+        None => true,
+        Some((bt, bid)) => t < bt || (t == bt && id < bid),
+    }
+}
+
 /// Closest-hit leaf test over triangle packets; `best` holds `(t, u, v, 4 packet + lane)`.
 struct ClosestPackets<'a> {
     packets: &'a [Tri4],
@@ -418,11 +432,14 @@ impl wide::Leaves for &mut ClosestPackets<'_> {
         for i in first..first + count {
             // SAFETY: leaf ranges lie inside `packets` (checked by `validate`).
             let p = unsafe { self.packets.get_unchecked(i as usize) };
-            if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, *t_max) {
-                *t_max = t;
+            let ids = &self.prim_ids[4 * i as usize..4 * i as usize + 4];
+            if let Some((t, u, v, lane)) = tri4::intersect4(&self.ray, p, *t_max, ids) {
                 let k = 4 * i as usize + lane;
-                wide::prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
-                self.best = Some((t, u, v, k));
+                if closer(t, self.prim_ids[k], self.best.map(|b| (b.0, self.prim_ids[b.3]))) {
+                    *t_max = t;
+                    wide::prefetch(self.prim_ids.as_ptr().wrapping_add(k) as *const u8, 1);
+                    self.best = Some((t, u, v, k));
+                }
             }
         }
         false
@@ -744,7 +761,9 @@ impl SceneAccel {
                 for k in first..first + count {
                     let object = self.tlas_order[k as usize];
                     if let Some(h) = self.intersect_object::<AVX2>(object, ray, t_max) {
-                        best = Some(h);
+                        if closer(h.t, (h.instance, h.prim), best.map(|b: Hit| (b.t, (b.instance, b.prim)))) {
+                            best = Some(h);
+                        }
                     }
                 }
                 false

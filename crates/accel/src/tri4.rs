@@ -116,21 +116,22 @@ struct Hits4 {
 }
 
 /// Closest hit among the four triangles with `t` in `[t_min, t_max]`:
-/// `(t, u, v, lane)`. The lowest lane wins a tie, as in the scalar order.
+/// `(t, u, v, lane)`. On equal `t` the lane with the smallest id in `ids` (the lanes'
+/// primitive ids) wins, so the answer does not depend on how triangles were packed.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub(crate) fn intersect4(r: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
+pub(crate) fn intersect4(r: &Ray4, p: &Tri4, t_max: f32, ids: &[u32]) -> Option<(f32, f32, f32, usize)> {
     let Hits4 { t, u, v, mask } = test4(r, p, t_max);
     if mask == 0 {
         return None;
     }
-    // Lowest t; the first such lane.
+    // Lowest t; the smallest id among equal t.
     let mut best = mask.trailing_zeros() as usize;
     let mut rest = mask & (mask - 1);
     while rest != 0 {
         let i = rest.trailing_zeros() as usize;
         rest &= rest - 1;
-        if t[i] < t[best] {
+        if t[i] < t[best] || (t[i] == t[best] && ids[i] < ids[best]) {
             best = i;
         }
     }
@@ -223,13 +224,13 @@ pub(crate) fn test4_scalar(
 /// Portable fallback: the scalar test per lane.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-pub(crate) fn intersect4(r4: &Ray4, p: &Tri4, t_max: f32) -> Option<(f32, f32, f32, usize)> {
+pub(crate) fn intersect4(r4: &Ray4, p: &Tri4, t_max: f32, ids: &[u32]) -> Option<(f32, f32, f32, usize)> {
     let (r, t_min) = (&r4.ray, r4.t_min);
     let mut best: Option<(f32, f32, f32, usize)> = None;
     let mut t_max = t_max;
     for lane in 0..4 {
         if let Some((t, u, v)) = intersect_watertight(r, &p.lane(lane), t_min, t_max) {
-            if best.map_or(true, |b| t < b.0) {
+            if best.is_none_or(|b| t < b.0 || (t == b.0 && ids[lane] < ids[b.3])) {
                 best = Some((t, u, v, lane));
                 t_max = t;
             }

@@ -157,6 +157,24 @@ impl RayBoxes {
 /// `1 + 2 gamma_3`: widening of the far slab distance (Ize 2013, sec. 3).
 pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
+/// Relative slack of box culling against the closest hit found so far (`2^-12`).
+///
+/// Closest hits are independent of traversal order only if every box holding a triangle
+/// hit at exactly `t_max` is still visited (ties then go to the smallest
+/// `(instance, prim)`, see `SceneAccel::intersect`). Such a box's entry distance is at
+/// most the triangle's exact distance, but the watertight `t` and the slab distances round
+/// differently (a few ulps, more for huge triangles seen from close by), so a box is culled
+/// only when its entry lies beyond `t_max (1 + 2^-12)`. The cost is an occasional extra box
+/// visit whose triangles then fail the exact `t <= t_max` test.
+pub(crate) const CULL_SCALE: f32 = 1.0 + 1.0 / 4096.0;
+
+/// The distance beyond which boxes are culled for a closest hit at `t_max` (see
+/// [`CULL_SCALE`]; non-positive and infinite `t_max` are kept as they are).
+#[inline(always)]
+pub(crate) fn cull_bound(t_max: f32) -> f32 {
+    (t_max * CULL_SCALE).max(t_max)
+}
+
 /// Slab test of a ray against the four child boxes: returns the hit mask (bit `i` for
 /// child `i`) and the entry distances.
 #[cfg(target_arch = "x86_64")]
@@ -181,7 +199,7 @@ fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
         // `_mm_max_ps(a, b)` returns `b` when either is NaN: slab distances go first so
         // that NaN lanes (origin in a slab plane, zero direction) are skipped.
         let t_near = _mm_max_ps(nz, _mm_max_ps(ny, _mm_max_ps(nx, _mm_set1_ps(t_min))));
-        let t_far = _mm_min_ps(fz, _mm_min_ps(fy, _mm_min_ps(fx, _mm_set1_ps(t_max))));
+        let t_far = _mm_min_ps(fz, _mm_min_ps(fy, _mm_min_ps(fx, _mm_set1_ps(cull_bound(t_max)))));
         let t_far = _mm_mul_ps(t_far, _mm_set1_ps(FAR_SCALE));
         let mask = _mm_movemask_ps(_mm_cmple_ps(t_near, t_far)) as u32;
         let mut out = [0.0f32; 4];
@@ -195,7 +213,7 @@ fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
 #[inline(always)]
 fn box4(n: &Node4, r: &RayBoxes, t_min: f32, t_max: f32) -> (u32, [f32; 4]) {
     let mut t_near = [t_min; 4];
-    let mut t_far = [t_max; 4];
+    let mut t_far = [cull_bound(t_max); 4];
     for k in 0..3 {
         let near = &n.bounds[r.near[k]];
         let far = &n.bounds[r.far[k]];
@@ -222,7 +240,7 @@ pub(crate) fn ray_touches_box(o: Vec3, d: Vec3, t_min: f32, t_max: f32, b: &Aabb
     if o.cmpge(b.min).all() && o.cmple(b.max).all() {
         return true;
     }
-    let (mut t_near, mut t_far) = (t_min, t_max);
+    let (mut t_near, mut t_far) = (t_min, cull_bound(t_max));
     for k in 0..3 {
         let inv = 1.0 / d[k];
         let (lo, hi) = ((b.min[k] - o[k]) * inv, (b.max[k] - o[k]) * inv);
@@ -373,7 +391,7 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
             sp -= 1;
             // SAFETY: entries below `sp` were written before `sp` was raised past them.
             let e = unsafe { stack[sp].assume_init() };
-            if e.t <= *t_max {
+            if e.t <= cull_bound(*t_max) {
                 cur = e;
                 break;
             }

@@ -62,28 +62,19 @@ fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
-/// Checks one ray: same hit/miss, same `t`, and a prim that brute force also hits at `t`.
+/// Checks one ray: the BVH gives exactly the brute-force hit (same bits of `t`, `u`, `v`:
+/// both use the same watertight arithmetic; the same triangle: both keep the smallest
+/// `(instance, prim)` among hits at equal `t`), and agrees on occlusion.
 fn check_ray(accel: &SceneAccel, brute: &BruteForce, ray: &Ray) -> Result<(), String> {
     let a = accel.intersect(ray);
     let b = brute.intersect(ray);
-    match (a, b) {
-        (None, None) => {}
-        (Some(a), Some(b)) => {
-            if a.t != b.t && (a.t - b.t).abs() > 1e-6 * b.t.abs().max(1e-3) {
-                return Err(format!("t differs: bvh {a:?} brute {b:?} ray {ray:?}"));
-            }
-            if (a.instance, a.prim) != (b.instance, b.prim) {
-                // Ties: the BVH may report another triangle hit at the same distance.
-                let all = brute.all_hits(ray);
-                if !all.iter().any(|&(t, i, p)| {
-                    (i, p) == (a.instance, a.prim) && (t - a.t).abs() <= 1e-6 * a.t.abs().max(1e-3)
-                }) {
-                    return Err(format!("bvh hit {a:?} is not a hit of brute force ({b:?}) ray {ray:?}"));
-                }
-            }
-            check_hit_in_range(&a, ray)?;
-        }
-        (a, b) => return Err(format!("hit/miss differs: bvh {a:?} brute {b:?} ray {ray:?}")),
+    let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim));
+    if bits(a) != bits(b) {
+        let all = brute.all_hits(ray);
+        return Err(format!("bvh {a:?} brute {b:?} ray {ray:?}; all hits {all:?}"));
+    }
+    if let Some(a) = a {
+        check_hit_in_range(&a, ray)?;
     }
     let occ = accel.occluded(ray);
     if occ != b.is_some() || occ != brute.occluded(ray) {
@@ -406,4 +397,62 @@ fn cornell_box_matches_brute_force_at_vertices_and_edges() {
             }
         }
     }
+}
+
+/// A mesh holding every triangle of `mesh` twice (the copies after the originals, in
+/// reverse order, so that they land in other packets and leaves).
+fn doubled(mesh: &Mesh) -> Mesh {
+    let mut m = mesh.clone();
+    m.indices.extend(mesh.indices.iter().rev());
+    m.material_ids.extend(mesh.material_ids.iter().rev());
+    m
+}
+
+/// Ties (hits at bit-identical `t`) go to the smallest `(instance, prim)` in every kernel,
+/// for flat and BVH bottom levels, merged and transformed instances: coincident triangles
+/// (a doubled mesh, and two instances of it) and rays through shared edges and vertices.
+#[test]
+fn ties_go_to_the_smallest_instance_and_prim() {
+    let cube = testmesh::subdivided_cube(3); // 108 triangles: a BVH
+    let tiny = testmesh::subdivided_cube(1); // 12 triangles: flat
+    let mut edge_ties = 0;
+    let moved = Affine3A::from_scale_rotation_translation(
+        Vec3::new(1.0, 2.0, 0.5),
+        Quat::from_rotation_y(0.3),
+        Vec3::new(0.25, 0.0, 0.0),
+    );
+    for base in [cube, tiny] {
+        let n = base.triangle_count() as u32;
+        for transform in [Affine3A::IDENTITY, moved] {
+            let mut scene = Scene::default();
+            scene.meshes.push(doubled(&base));
+            let inst = Instance { mesh: 0, transform, material_override: None };
+            scene.instances = vec![inst.clone(), inst];
+            let brute = BruteForce::build(&scene);
+            // Rays from inside through every vertex and edge midpoint, and random rays.
+            let mut rays = random_rays(&scene, 400, 31);
+            let c = transform.transform_point3(Vec3::new(0.1, -0.2, 0.3));
+            for [a, b, _] in &base.indices {
+                let [a, b] = [a, b].map(|&i| transform.transform_point3(base.positions[i as usize]));
+                rays.extend([Ray::new(c, a - c), Ray::new(c, 0.5 * (a + b) - c)]);
+            }
+            for accel in accels(&scene, &BuildParams::default()) {
+                let mut hits = 0;
+                for ray in &rays {
+                    check_ray(&accel, &brute, ray).unwrap_or_else(|e| panic!("{:?}: {e}", accel.simd()));
+                    if let Some(h) = accel.intersect(ray) {
+                        hits += 1;
+                        assert_eq!(h.instance, 0, "{h:?}");
+                        assert!(h.prim < n, "a copy won a tie: {h:?}");
+                        let ties = brute.all_hits(ray).iter().filter(|a| a.0 == h.t).count();
+                        assert!(ties >= 4, "every hit is shared by at least 4 triangles: {ties}");
+                        edge_ties += (ties > 4) as usize;
+                    }
+                }
+                assert!(hits > 250, "{hits} hits");
+            }
+        }
+    }
+    // Rays through edges with bit-identical `t` on both sides (ties of 8 triangles).
+    assert!(edge_ties > 100, "{edge_ties}");
 }

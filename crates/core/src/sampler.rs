@@ -95,9 +95,10 @@ const SOBOL_DIM1_REV_BYTES: [[u32; 256]; 4] = {
     byte_tables(cols)
 };
 
-/// `reverse(sobol_dim1(reverse(i_rev)))` by four table lookups.
+/// `reverse(sobol_dim1(reverse(i_rev)))` by four table lookups (public for samplers that
+/// evaluate several sample keys at once, e.g. the render crate's 8-lane sampler).
 #[inline]
-fn sobol_dim1_reversed(i_rev: u32) -> u32 {
+pub fn sobol_dim1_reversed(i_rev: u32) -> u32 {
     SOBOL_DIM1_REV_BYTES[0][(i_rev & 0xff) as usize]
         ^ SOBOL_DIM1_REV_BYTES[1][((i_rev >> 8) & 0xff) as usize]
         ^ SOBOL_DIM1_REV_BYTES[2][((i_rev >> 16) & 0xff) as usize]
@@ -122,7 +123,7 @@ pub fn sobol_dim1_naive(index: u32) -> u32 {
 /// Laine-Karras style hash permutation: bit `i` of the result depends only on bits `<= i`
 /// of `x` (Burley 2020, listing 3, with the improved constants of its sec. 5).
 #[inline]
-fn laine_karras_permutation(mut x: u32, seed: u32) -> u32 {
+pub fn laine_karras_permutation(mut x: u32, seed: u32) -> u32 {
     x = x.wrapping_add(seed);
     x ^= x.wrapping_mul(0x6c50_b47c);
     x ^= x.wrapping_mul(0xb82f_1e52);

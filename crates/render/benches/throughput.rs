@@ -1,10 +1,11 @@
 //! Headline throughput: samples per second on the built-in Cornell box at 512 x 512,
 //! max depth 8, on local rayon pools of 1 and 2 threads (build time excluded).
 //!
-//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...]]`
-//! (default 16 spp, threads 1 2). Prints one line per thread count and a JSON line.
+//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...] [scalar|lockstep|portable] [lanes]]`
+//! (default 16 spp, threads 1 2, the renderer's default trace mode). Prints one line per
+//! thread count and a JSON line; `lanes` also prints the lockstep lane utilisation.
 
-use filtrace_render::{render_bench, RenderSettings, Renderer};
+use filtrace_render::{render_bench, RenderSettings, Renderer, TraceMode};
 
 fn main() {
     // cargo bench passes `--bench`; ignore flags.
@@ -13,8 +14,33 @@ fn main() {
     let threads: Vec<usize> =
         if args.len() > 1 { args[1..].iter().map(|&t| t as usize).collect() } else { vec![1, 2] };
     let settings = RenderSettings { width: 512, height: 512, spp, max_depth: 8, seed: 0 };
-    let renderer = Renderer::new(filtrace_scene::builtin("cornell").expect("cornell"), settings).unwrap();
-    println!("cornell 512x512 spp {spp} max_depth 8, build {:.3} ms", renderer.build_seconds() * 1e3);
+    let words: Vec<String> = std::env::args().skip(1).collect();
+    let has = |w: &str| words.iter().any(|a| a == w);
+    let mut renderer = Renderer::new(filtrace_scene::builtin("cornell").expect("cornell"), settings).unwrap();
+    for (word, mode) in [
+        ("scalar", TraceMode::Scalar),
+        ("lockstep", TraceMode::Lockstep),
+        ("portable", TraceMode::LockstepPortable),
+    ] {
+        if has(word) {
+            renderer = renderer.with_trace_mode(mode);
+        }
+    }
+    println!(
+        "cornell 512x512 spp {spp} max_depth 8, trace mode {:?}, build {:.3} ms",
+        renderer.trace_mode(),
+        renderer.build_seconds() * 1e3
+    );
+    if has("lanes") {
+        let s = renderer.lane_stats(0, spp);
+        let per_vertex: Vec<String> = (0..8).map(|v| format!("{:.3}", s.utilisation(v))).collect();
+        println!(
+            "lanes: {} groups, alive per vertex (fraction of 8 lanes) [{}], mean utilisation over bounces run {:.3}",
+            s.groups,
+            per_vertex.join(" "),
+            s.mean_utilisation()
+        );
+    }
     for t in threads {
         let cpu0 = cpu_seconds();
         let r = render_bench(&renderer, t);
@@ -36,8 +62,10 @@ fn main() {
             r.mean_color[2]
         );
         println!(
-            "{{\"bench\":\"render_cornell_512\",\"threads\":{t},\"spp\":{spp},\"seconds\":{:.4},\"samples_per_second\":{:.0}}}",
-            r.seconds, r.samples_per_second
+            "{{\"bench\":\"render_cornell_512\",\"mode\":\"{:?}\",\"threads\":{t},\"spp\":{spp},\"seconds\":{:.4},\"samples_per_second\":{:.0}}}",
+            renderer.trace_mode(),
+            r.seconds,
+            r.samples_per_second
         );
     }
 }

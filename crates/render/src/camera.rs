@@ -26,13 +26,13 @@ pub struct PinholeCamera {
     /// Unit viewing direction.
     pub forward: Vec3,
     /// Camera-space right and up axes, scaled to half the image plane at distance 1.
-    right_half: Vec3,
-    up_half: Vec3,
+    pub(crate) right_half: Vec3,
+    pub(crate) up_half: Vec3,
     width: u32,
     height: u32,
     /// `2 / width` and `2 / height`: raster to screen space by multiplication (two
     /// divisions per camera ray fewer).
-    two_over_size: Vec2,
+    pub(crate) two_over_size: Vec2,
 }
 
 impl PinholeCamera {

@@ -22,6 +22,8 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
+use crate::integrator::lanes::LANES;
+use crate::integrator::lockstep::{self, LaneStats, LockstepContext};
 use crate::integrator::{self, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
 use crate::surface::SceneGeometry;
@@ -125,6 +127,21 @@ pub enum IntegratorKind {
     BsdfOnly,
 }
 
+/// How the path tracer ([`IntegratorKind::Path`]) walks its paths. Both give the same film,
+/// bit for bit (`tests/lockstep.rs`); the choice is speed only.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TraceMode {
+    /// Eight adjacent pixels of a row in lockstep ([`integrator::lockstep`]), AVX2 lane code
+    /// when the CPU has AVX2 and FMA, else the portable lane code.
+    Lockstep,
+    /// [`TraceMode::Lockstep`] with the portable lane code even on AVX2 CPUs (for tests and
+    /// comparisons).
+    LockstepPortable,
+    /// One path at a time ([`integrator::path::li`]), the reference.
+    #[default]
+    Scalar,
+}
+
 /// A scene ready to render.
 pub struct Renderer {
     scene: Scene,
@@ -134,6 +151,7 @@ pub struct Renderer {
     geometry: SceneGeometry,
     camera: PinholeCamera,
     integrator: IntegratorKind,
+    trace_mode: TraceMode,
     build_seconds: f64,
 }
 
@@ -157,6 +175,7 @@ impl Renderer {
             geometry,
             camera,
             integrator: IntegratorKind::Path,
+            trace_mode: TraceMode::default(),
             build_seconds,
         })
     }
@@ -165,6 +184,17 @@ impl Renderer {
     pub fn with_integrator(mut self, kind: IntegratorKind) -> Self {
         self.integrator = kind;
         self
+    }
+
+    /// Switches between the lockstep and the scalar path tracer (same film; see
+    /// [`TraceMode`]). The BSDF-only integrator is always scalar.
+    pub fn with_trace_mode(mut self, mode: TraceMode) -> Self {
+        self.trace_mode = mode;
+        self
+    }
+
+    pub fn trace_mode(&self) -> TraceMode {
+        self.trace_mode
     }
 
     pub fn scene(&self) -> &Scene {
@@ -275,6 +305,16 @@ impl Renderer {
 
     /// Renders samples `[first, end)` of the pixels of the band starting at row `y0`.
     fn render_tile(&self, y0: usize, pixels: &mut [FilmPixel], first: u32, end: u32) {
+        if self.integrator == IntegratorKind::Path {
+            let mut stats = LaneStats::default();
+            match self.trace_mode {
+                TraceMode::Lockstep => return self.render_tile_lockstep(y0, pixels, first, end, &mut stats),
+                TraceMode::LockstepPortable => {
+                    return self.render_tile_lockstep_portable(y0, pixels, first, end, &mut stats)
+                }
+                TraceMode::Scalar => {}
+            }
+        }
         let width = self.settings.width as usize;
         for (i, px) in pixels.iter_mut().enumerate() {
             let (x, y) = ((i % width) as u32, (y0 + i / width) as u32);
@@ -291,6 +331,107 @@ impl Renderer {
             }
             *px = acc;
         }
+    }
+
+    /// [`Renderer::render_tile`] in lockstep, with the best lane code the CPU runs.
+    fn render_tile_lockstep(
+        &self,
+        y0: usize,
+        pixels: &mut [FilmPixel],
+        first: u32,
+        end: u32,
+        stats: &mut LaneStats,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.render_tile_lockstep_avx2(y0, pixels, first, end, stats) };
+        }
+        self.render_tile_lockstep_portable(y0, pixels, first, end, stats)
+    }
+
+    /// The lane code compiled for AVX2 + FMA (the same source; only instruction selection
+    /// differs, as Rust never contracts into FMAs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn render_tile_lockstep_avx2(
+        &self,
+        y0: usize,
+        pixels: &mut [FilmPixel],
+        first: u32,
+        end: u32,
+        stats: &mut LaneStats,
+    ) {
+        self.lockstep_tile(y0, pixels, first, end, stats)
+    }
+
+    /// The portable lane code.
+    fn render_tile_lockstep_portable(
+        &self,
+        y0: usize,
+        pixels: &mut [FilmPixel],
+        first: u32,
+        end: u32,
+        stats: &mut LaneStats,
+    ) {
+        self.lockstep_tile(y0, pixels, first, end, stats)
+    }
+
+    /// Groups of [`LANES`] adjacent pixels of each row, one sample index at a time; each
+    /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
+    /// the same bit for bit.
+    #[inline(always)]
+    fn lockstep_tile(
+        &self,
+        y0: usize,
+        pixels: &mut [FilmPixel],
+        first: u32,
+        end: u32,
+        stats: &mut LaneStats,
+    ) {
+        let width = self.settings.width as usize;
+        let lc = LockstepContext { ctx: self.context(), params: self.path_params(), camera: &self.camera };
+        for (row, row_pixels) in pixels.chunks_mut(width).enumerate() {
+            let y = (y0 + row) as u32;
+            for (g, group) in row_pixels.chunks_mut(LANES).enumerate() {
+                let x0 = (g * LANES) as u32;
+                let n = group.len();
+                let lanes: [bool; LANES] = std::array::from_fn(|i| i < n);
+                let x: [u32; LANES] = std::array::from_fn(|i| x0 + i as u32);
+                let key: [u32; LANES] =
+                    std::array::from_fn(|i| Sampler::pixel_key(x[i], y, self.settings.seed));
+                let mut acc: [FilmPixel; LANES] =
+                    std::array::from_fn(|i| group.get(i).copied().unwrap_or_default());
+                for index in first..end {
+                    let s = lockstep::trace_group(&lc, &x, y, &key, index, lanes, stats);
+                    for i in 0..n {
+                        if let Some(surface) = s[i].surface {
+                            acc[i].surface = surface;
+                        }
+                        acc[i].add(&s[i].radiance.to_pixel_sample());
+                    }
+                }
+                group.copy_from_slice(&acc[..n]);
+            }
+        }
+    }
+
+    /// Lane utilisation of the lockstep tracer for samples `[first, first + count)` of every
+    /// pixel (renders on the current thread into a scratch film).
+    pub fn lane_stats(&self, first: u32, count: u32) -> LaneStats {
+        let mut film = self.new_film();
+        let mut stats = LaneStats::default();
+        let width = self.settings.width as usize;
+        for (tile, pixels) in film.pixels_mut().chunks_mut(width * TILE_ROWS).enumerate() {
+            self.render_tile_lockstep(
+                tile * TILE_ROWS,
+                pixels,
+                first,
+                first.saturating_add(count),
+                &mut stats,
+            );
+        }
+        stats
     }
 
     /// A full render of `settings.spp` samples per pixel in one pass.

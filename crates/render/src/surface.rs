@@ -70,15 +70,15 @@ struct InstanceRecord {
 
 /// Per-triangle data of [`SceneGeometry`].
 #[derive(Clone, Copy, Debug)]
-struct TriangleRecord {
+pub(crate) struct TriangleRecord {
     /// World-space corners.
-    p: [Vec3; 3],
+    pub(crate) p: [Vec3; 3],
     /// Unit winding normal `normalize((p1 - p0) x (p2 - p0))`, zero for degenerate or
     /// non-finite triangles (so that a hit needs neither a cross product nor a square root).
-    n: Vec3,
+    pub(crate) n: Vec3,
     /// Largest absolute coordinate of the corners (the scale of the offset bound).
-    scale: f32,
-    material: MaterialId,
+    pub(crate) scale: f32,
+    pub(crate) material: MaterialId,
 }
 
 impl SceneGeometry {
@@ -127,6 +127,18 @@ impl SceneGeometry {
     #[inline]
     fn record(&self, instance: u32, prim: u32) -> &TriangleRecord {
         &self.tris[(self.instances[instance as usize].first_tri + prim) as usize]
+    }
+
+    /// The record of triangle `prim` of instance `instance` when its mesh has neither
+    /// vertex normals nor uvs (the lockstep integrator's vector `from_hit`; other hits go
+    /// through [`SurfaceInteraction::from_hit`]).
+    #[inline]
+    pub(crate) fn plain_record(&self, instance: u32, prim: u32) -> Option<&TriangleRecord> {
+        let inst = &self.instances[instance as usize];
+        if inst.has_normals || inst.has_uvs {
+            return None;
+        }
+        Some(&self.tris[(inst.first_tri + prim) as usize])
     }
 
     /// World-space corners of triangle `prim` of instance `instance`.

@@ -16,6 +16,8 @@
 //! 8 = up to 7 bounces (the default), -1 = unbounded (Russian roulette ends paths).
 
 pub mod bsdf_only;
+pub mod lanes;
+pub mod lockstep;
 pub mod path;
 
 use crate::bsdf::SurfaceBsdf;

@@ -226,6 +226,28 @@ impl LightSet {
         (l != NONE).then_some(l as usize)
     }
 
+    /// The light `u_select` picks and its selection probability (the first step of
+    /// [`Self::sample_li`]).
+    #[inline]
+    pub fn select(&self, u_select: f32) -> (usize, f32) {
+        self.selection.sample(u_select)
+    }
+
+    /// Light `i` when it is an area light.
+    #[inline]
+    pub fn area_light(&self, i: usize) -> Option<&AreaLight> {
+        match self.lights.get(i) {
+            Some(LightKind::Area(a)) => Some(a),
+            _ => None,
+        }
+    }
+
+    /// True when the scene has an environment light.
+    #[inline]
+    pub fn has_environment(&self) -> bool {
+        self.environment.is_some()
+    }
+
     /// Picks a light with `u_select` and samples a direction towards it from `p`.
     #[inline]
     pub fn sample_li(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<LightSample> {

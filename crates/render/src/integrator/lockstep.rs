@@ -1,0 +1,623 @@
+//! The path tracer of [`super::path`] run on eight paths in lockstep: eight adjacent pixels
+//! of an image row at the same sample index, in structure-of-arrays lanes, stage by stage
+//! per bounce (the shape of Mitsuba 3's `llvm_ad_rgb` variant and of pbrt-v4's wavefront
+//! integrator, on one core).
+//!
+//! Per bounce, for the lanes still alive (`act`): emission found by the previous BSDF
+//! sample (MIS against light sampling), the sampler (eight keys per integer instruction,
+//! [`Sampler8`]), shading frames, next-event estimation (light selection per lane, area
+//! lights sampled in lanes, one packet of shadow rays, BSDF value and density in lanes for
+//! diffuse surfaces), BSDF sampling (cosine hemisphere in lanes for diffuse surfaces),
+//! Russian roulette, and one packet of closest-hit queries followed by the hit records
+//! (`from_hit` in lanes for meshes without vertex attributes).
+//!
+//! **Exactness is the contract.** Every lane performs the operations of
+//! [`super::path::li`] / [`super::path::trace_from_hit`] in the same order (see
+//! [`super::lanes`]), and what is not worth a lane version (glossy BSDFs, point, spot,
+//! directional and environment lights, emission, misses, meshes with normals or uvs) calls
+//! the scalar code for that lane. The film is therefore bit-identical to the scalar
+//! renderer's (colour, variance and every AOV), which `tests/lockstep.rs` checks on every
+//! built-in scene and on a TOML scene with every material, light type and a texture.
+//! Since all lanes start together and every stage is per vertex, the vertex index is the
+//! same in all lanes, and so are the sampler slots.
+//!
+//! Lanes that end (miss, roulette, zero throughput, depth limit) stay idle until the
+//! group's slowest path ends; [`LaneStats`] counts the lanes alive at each vertex.
+
+// `!(x <= 0.0)` and `!(!a && b)` are written as in the scalar code they mirror (NaN
+// included), not in the form clippy prefers.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
+
+use super::lanes::{and, bits, from_bits, not, select, Sampler8, F8, LANES, M8, V8};
+use super::path::visible_surface;
+use super::{
+    vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
+    SLOT_PIXEL, SLOT_RR,
+};
+use crate::bsdf::{Diffuse, SurfaceBsdf};
+use crate::camera::PinholeCamera;
+use crate::film::VisibleSurface;
+use crate::surface::{gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION};
+use filtrace_accel::{Hit, HitPacket, RayPacket};
+use filtrace_core::sampling::power_heuristic;
+use filtrace_core::{Ray, Rgb, Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
+
+/// Longest path (in vertices) [`LaneStats`] tells apart; longer ones count as the last.
+pub const STATS_VERTICES: usize = 16;
+
+/// Lane utilisation of the lockstep integrator: how many lanes are alive at each path
+/// vertex, summed over the groups traced.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LaneStats {
+    /// Groups of eight lanes traced (one per 8 pixels and sample index).
+    pub groups: u64,
+    /// Lanes holding a pixel (fewer than 8 only at the right edge of the image).
+    pub camera_lanes: u64,
+    /// Bounces run, summed over groups (a group runs bounce `v` while any lane is alive).
+    pub bounces: u64,
+    /// `alive[v]`: lanes with a path vertex `v` (first hit = 0) at the start of bounce `v`.
+    pub alive: [u64; STATS_VERTICES],
+}
+
+impl LaneStats {
+    /// Adds `other`'s counts.
+    pub fn merge(&mut self, other: &LaneStats) {
+        self.groups += other.groups;
+        self.camera_lanes += other.camera_lanes;
+        self.bounces += other.bounces;
+        for (a, b) in self.alive.iter_mut().zip(other.alive.iter()) {
+            *a += b;
+        }
+    }
+
+    /// Fraction of all lane slots (8 per group) alive at vertex `v`.
+    pub fn utilisation(&self, v: usize) -> f64 {
+        self.alive[v.min(STATS_VERTICES - 1)] as f64 / (self.groups.max(1) * LANES as u64) as f64
+    }
+
+    /// Lane slots used over lane slots paid for: alive lanes summed over vertices, divided
+    /// by 8 x the bounces the groups ran.
+    pub fn mean_utilisation(&self) -> f64 {
+        self.alive.iter().sum::<u64>() as f64 / (self.bounces.max(1) * LANES as u64) as f64
+    }
+}
+
+/// The hit records of eight lanes, structure of arrays (a [`SurfaceInteraction`] per lane).
+#[derive(Clone, Copy, Debug, Default)]
+struct Surf8 {
+    p: V8,
+    /// `p_error` (the same value in all three components).
+    err: F8,
+    n_g: V8,
+    n_s: V8,
+    n_winding: V8,
+    front_face: M8,
+    wo: V8,
+    uv: [Vec2; LANES],
+    material: [u32; LANES],
+    instance: [u32; LANES],
+    prim: [u32; LANES],
+    t: F8,
+}
+
+impl Surf8 {
+    /// Lane `i` as a [`SurfaceInteraction`] (for the per-lane scalar code).
+    #[inline(always)]
+    fn lane(&self, i: usize) -> SurfaceInteraction {
+        SurfaceInteraction {
+            p: self.p.lane(i),
+            p_error: Vec3::splat(self.err.0[i]),
+            n_g: self.n_g.lane(i),
+            n_s: self.n_s.lane(i),
+            n_winding: self.n_winding.lane(i),
+            front_face: self.front_face[i],
+            wo: self.wo.lane(i),
+            uv: self.uv[i],
+            material: self.material[i],
+            instance: self.instance[i],
+            prim: self.prim[i],
+            t: self.t.0[i],
+        }
+    }
+
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, si: &SurfaceInteraction) {
+        self.p.set_lane(i, si.p);
+        self.err.0[i] = si.p_error.x;
+        self.n_g.set_lane(i, si.n_g);
+        self.n_s.set_lane(i, si.n_s);
+        self.n_winding.set_lane(i, si.n_winding);
+        self.front_face[i] = si.front_face;
+        self.wo.set_lane(i, si.wo);
+        self.uv[i] = si.uv;
+        self.material[i] = si.material;
+        self.instance[i] = si.instance;
+        self.prim[i] = si.prim;
+        self.t.0[i] = si.t;
+    }
+
+    /// [`SurfaceInteraction::offset_origin`] in lanes: `p` pushed along `n_g` to the side
+    /// of `w` by `|n_g| . p_error`.
+    #[inline(always)]
+    fn offset_origin(&self, w: V8) -> V8 {
+        let a = self.n_g.abs();
+        let d = a.x * self.err + a.y * self.err + a.z * self.err;
+        let below = w.dot(self.n_g).lt(F8::splat(0.0));
+        let s = select(below, -d, d);
+        self.p + self.n_g * s
+    }
+}
+
+/// Iterates over the set lanes of `m`.
+#[inline(always)]
+fn lanes_of(m: M8) -> impl Iterator<Item = usize> {
+    (0..LANES).filter(move |&i| m[i])
+}
+
+/// [`SurfaceInteraction::from_hit`] for the lanes of `hits`: in lanes for meshes without
+/// vertex normals and uvs, else the scalar function. Returns the records and the lanes
+/// with a usable hit (a hit on a degenerate triangle counts as a miss, as in the scalar
+/// `PathContext::intersect`).
+#[inline(always)]
+fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket) -> (Surf8, M8) {
+    let hit = from_bits(hits.mask);
+    let mut p0 = V8::default();
+    let mut p1 = V8::default();
+    let mut p2 = V8::default();
+    let mut n = V8::default();
+    let mut scale = F8::default();
+    let mut s = Surf8::default();
+    let mut plain = [false; LANES];
+    let mut scalar_ok = [false; LANES];
+    let mut scalar = [None; LANES];
+    for i in lanes_of(hit) {
+        match ctx.geometry.plain_record(hits.instance[i], hits.prim[i]) {
+            Some(r) => {
+                plain[i] = true;
+                p0.set_lane(i, r.p[0]);
+                p1.set_lane(i, r.p[1]);
+                p2.set_lane(i, r.p[2]);
+                n.set_lane(i, r.n);
+                scale.0[i] = r.scale;
+                s.material[i] = r.material;
+            }
+            None => {
+                let h = Hit {
+                    t: hits.t[i],
+                    u: hits.u[i],
+                    v: hits.v[i],
+                    instance: hits.instance[i],
+                    prim: hits.prim[i],
+                };
+                let ray = Ray::new(Vec3::ZERO, dir.lane(i));
+                scalar[i] = SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h);
+                scalar_ok[i] = scalar[i].is_some();
+            }
+        }
+        s.instance[i] = hits.instance[i];
+        s.prim[i] = hits.prim[i];
+    }
+    // The lane version of `from_hit` (mesh without normals and uvs: n_s = n_g = winding).
+    let (b1, b2) = (F8(hits.u), F8(hits.v));
+    let b0 = F8::splat(1.0) - b1 - b2;
+    s.p = p0 * b0 + p1 * b1 + p2 * b2;
+    s.err = scale * F8::splat(gamma(7) * OFFSET_SAFETY) + F8::splat(OFFSET_FLOOR);
+    let dir_len = dir.length();
+    s.wo = *dir * (F8::splat(-1.0) / dir_len);
+    let d = n.dot(s.wo);
+    s.front_face = d.gt(F8::splat(0.0));
+    // `n_s . n_winding < 0` never holds here (n_s = n_winding, unit length); `facing`:
+    let flip = d.lt(F8::splat(0.0));
+    s.n_winding = n;
+    s.n_g = V8::select(flip, -n, n);
+    s.n_s = s.n_g;
+    s.t = F8(hits.t) * dir_len;
+    for i in lanes_of(plain) {
+        s.uv[i] = Vec2::new(b1.0[i], b2.0[i]);
+    }
+    let ok_plain = and(plain, not(n.is_zero()));
+    for i in lanes_of(scalar_ok) {
+        if let Some(si) = &scalar[i] {
+            s.set_lane(i, si);
+        }
+    }
+    let ok = std::array::from_fn(|i| ok_plain[i] || scalar_ok[i]);
+    (s, ok)
+}
+
+/// `Frame::from_z(n)` in lanes (Duff et al. 2017), as `(x, y)` (`z = n`).
+#[inline(always)]
+fn frame_from_z(n: V8) -> (V8, V8) {
+    let sign = n.z.map(|z| 1.0f32.copysign(z));
+    let a = F8::splat(-1.0) / (sign + n.z);
+    let b = n.x * n.y * a;
+    let x = V8::new(F8::splat(1.0) + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let y = V8::new(b, sign + n.y * n.y * a, -n.y);
+    (x, y)
+}
+
+/// `Frame::to_local`.
+#[inline(always)]
+fn to_local(fx: &V8, fy: &V8, n: &V8, v: V8) -> V8 {
+    V8::new(v.dot(*fx), v.dot(*fy), v.dot(*n))
+}
+
+/// `Frame::to_world`.
+#[inline(always)]
+fn to_world(fx: &V8, fy: &V8, n: &V8, v: V8) -> V8 {
+    *fx * v.x + *fy * v.y + *n * v.z
+}
+
+/// `power_heuristic(1, f_pdf, 1, g_pdf)` in lanes.
+#[inline(always)]
+fn power_heuristic8(f_pdf: F8, g_pdf: F8) -> F8 {
+    let f = F8::splat(1.0) * f_pdf;
+    let g = F8::splat(1.0) * g_pdf;
+    let f2 = f * f;
+    let denom = f2 + g * g;
+    let w = select(denom.gt(F8::splat(0.0)), f2 / denom, F8::splat(0.0));
+    F8(std::array::from_fn(|i| if f2.0[i].is_infinite() { 1.0 } else { w.0[i] }))
+}
+
+/// `sin_cos_quarter_pi` in lanes (same Horner polynomials).
+#[inline(always)]
+fn sin_cos_quarter_pi8(x: F8) -> (F8, F8) {
+    let k = F8::splat;
+    let x2 = x * x;
+    let s = x
+        * (k(1.0)
+            + x2 * (k(-1.0 / 6.0)
+                + x2 * (k(1.0 / 120.0) + x2 * (k(-1.0 / 5040.0) + x2 * k(1.0 / 362_880.0)))));
+    let c = k(1.0)
+        + x2 * (k(-0.5)
+            + x2 * (k(1.0 / 24.0)
+                + x2 * (k(-1.0 / 720.0) + x2 * (k(1.0 / 40_320.0) + x2 * k(-1.0 / 3_628_800.0)))));
+    (s, c)
+}
+
+/// `sample_cosine_hemisphere` in lanes: the concentric disk's two branches become a
+/// select of numerator, denominator and the roles of sine and cosine.
+#[inline(always)]
+fn sample_cosine_hemisphere8(ux: F8, uy: F8) -> V8 {
+    let ox = F8::splat(2.0) * ux - F8::splat(1.0);
+    let oy = F8::splat(2.0) * uy - F8::splat(1.0);
+    let zero = F8::splat(0.0);
+    let origin = and(ox.eq(zero), oy.eq(zero));
+    let first = ox.abs().gt(oy.abs());
+    let num = select(first, oy, ox);
+    let den = select(first, ox, oy);
+    let (s, c) = sin_cos_quarter_pi8(F8::splat(FRAC_PI_4) * (num / den));
+    let dx = select(origin, zero, den * select(first, c, s));
+    let dy = select(origin, zero, den * select(first, s, c));
+    let z = (F8::splat(1.0) - dx * dx - dy * dy).max(zero).sqrt();
+    V8::new(dx, dy, z)
+}
+
+/// Everything a group of eight lanes needs besides the pixels.
+pub struct LockstepContext<'a> {
+    pub ctx: PathContext<'a>,
+    pub params: PathParams,
+    pub camera: &'a PinholeCamera,
+}
+
+/// Traces sample `index` of the pixels `(x[i], y)` for the lanes set in `lanes`; `key[i]`
+/// is the pixel's [`filtrace_core::sampler::Sampler::pixel_key`]. Lane `i`'s result equals
+/// `Renderer::trace_sample(x[i], y, index)` bit for bit (visible surface at sample 0).
+#[inline(always)]
+pub fn trace_group(
+    lc: &LockstepContext,
+    x: &[u32; LANES],
+    y: u32,
+    key: &[u32; LANES],
+    index: u32,
+    lanes: M8,
+    stats: &mut LaneStats,
+) -> [CameraSample; LANES] {
+    let ctx = &lc.ctx;
+    let params = &lc.params;
+    let cam = lc.camera;
+    let sampler = Sampler8::new(*key, index);
+    let mut out = [CameraSample::default(); LANES];
+    stats.groups += 1;
+    stats.camera_lanes += lanes.iter().filter(|&&l| l).count() as u64;
+
+    // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
+    let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
+    let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
+    let px = F8(x.map(|v| v as f32));
+    let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
+    let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
+    let dir =
+        (V8::splat(cam.forward) + V8::splat(cam.right_half) * sx + V8::splat(cam.up_half) * sy).normalize();
+    let mut rays = RayPacket {
+        origin: [[cam.eye.x; LANES], [cam.eye.y; LANES], [cam.eye.z; LANES]],
+        dir: [dir.x.0, dir.y.0, dir.z.0],
+        t_min: [0.0; LANES],
+        t_max: [f32::INFINITY; LANES],
+    };
+    let hits = ctx.accel.intersect_packet(&rays, bits(lanes));
+    let (mut si, hit) = from_hits(ctx, &dir, &hits);
+    let want_surface = index == 0;
+    for i in lanes_of(lanes) {
+        if hit[i] {
+            if want_surface {
+                out[i].surface = Some(visible_surface(ctx, &si.lane(i)));
+            }
+        } else {
+            out[i].radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
+            out[i].surface = want_surface.then(VisibleSurface::default);
+        }
+    }
+
+    // The paths from the first hits (`trace_from_hit`).
+    let mut act = hit;
+    let zero = F8::splat(0.0);
+    let mut beta = V8::splat(Rgb::ONE);
+    let mut l_direct = V8::default();
+    let mut l_indirect = V8::default();
+    let mut p_b = zero;
+    let mut specular = [false; LANES];
+    let mut prev_p = V8::default();
+    let mut vertex = 0u32;
+    let materials = &ctx.scene.materials;
+    let default_bsdf = SurfaceBsdf::Diffuse(Diffuse::new(Rgb::ZERO));
+
+    loop {
+        stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.iter().filter(|&&a| a).count() as u64;
+        stats.bounces += 1;
+
+        // Emitted radiance at the vertex (per lane: few lanes hit an emitter).
+        for i in lanes_of(act) {
+            let m = &materials[si.material[i] as usize];
+            if !(m.is_emissive() && (si.front_face[i] || m.two_sided_emission)) {
+                continue;
+            }
+            let le = m.emission;
+            if le != Rgb::ZERO {
+                let w_b = if vertex == 0 || specular[i] {
+                    1.0
+                } else {
+                    let p_l = ctx.lights.pdf_area(
+                        si.instance[i],
+                        si.prim[i],
+                        prev_p.lane(i),
+                        si.p.lane(i),
+                        si.n_winding.lane(i),
+                    );
+                    power_heuristic(1.0, p_b.0[i], 1.0, p_l)
+                };
+                let l = beta.lane(i) * w_b * le;
+                if vertex <= 1 {
+                    l_direct.set_lane(i, l_direct.lane(i) + l);
+                } else {
+                    l_indirect.set_lane(i, l_indirect.lane(i) + l);
+                }
+            }
+        }
+
+        // Stop when one more segment would exceed max_depth.
+        if !params.allows(vertex + 2) {
+            break;
+        }
+
+        // The BSDFs, the shading frames and wo in them.
+        let mut bsdf = [default_bsdf; LANES];
+        let mut diffuse = [false; LANES];
+        let mut lobe = [false; LANES];
+        let mut rho = V8::default();
+        for i in lanes_of(act) {
+            bsdf[i] = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
+            match &bsdf[i] {
+                SurfaceBsdf::Diffuse(d) => {
+                    diffuse[i] = true;
+                    rho.set_lane(i, d.reflectance);
+                }
+                b => lobe[i] = b.has_lobe_choice(),
+            }
+        }
+        let glossy = and(act, not(diffuse));
+        let (fx, fy) = frame_from_z(si.n_s);
+        let n = si.n_s;
+        let wo = to_local(&fx, &fy, &n, si.wo);
+
+        // The vertex's random numbers (`VertexSamples::draw`).
+        let base = vertex_slot(vertex);
+        let (ulx, uly) = sampler.next_2d(base + SLOT_LIGHT);
+        let (ubx, uby) = sampler.next_2d(base + SLOT_BSDF);
+        let (u_select, u_lobe) = if lobe.iter().any(|&l| l) {
+            let (cx, cy) = sampler.next_2d(base + SLOT_CHOICES);
+            (cx, select(lobe, cy, zero))
+        } else {
+            (sampler.next_1d(base + SLOT_CHOICES), zero)
+        };
+
+        // Next-event estimation (`sample_one_light`): light choice per lane, area lights
+        // sampled in lanes, other lights by the scalar `sample_li`.
+        let mut area = [false; LANES];
+        let mut ls_ok = [false; LANES];
+        let mut ls_wi = V8::default();
+        let mut ls_li = V8::default();
+        let mut ls_pdf = zero;
+        let mut ls_dist = zero;
+        let mut ls_delta = [false; LANES];
+        let mut pmf = zero;
+        let (mut a_p0, mut a_e1, mut a_e2, mut a_n) =
+            (V8::default(), V8::default(), V8::default(), V8::default());
+        let mut a_area = zero;
+        let mut a_two = [false; LANES];
+        for i in lanes_of(act) {
+            let (li, pm) = ctx.lights.select(u_select.0[i]);
+            if pm > 0.0 {
+                if let Some(a) = ctx.lights.area_light(li) {
+                    area[i] = true;
+                    pmf.0[i] = pm;
+                    a_p0.set_lane(i, a.p0);
+                    a_e1.set_lane(i, a.e1);
+                    a_e2.set_lane(i, a.e2);
+                    a_n.set_lane(i, a.n);
+                    a_area.0[i] = a.area;
+                    a_two[i] = a.two_sided;
+                    ls_li.set_lane(i, a.le);
+                    continue;
+                }
+            }
+            if let Some(ls) = ctx.lights.sample_li(si.p.lane(i), u_select.0[i], Vec2::new(ulx.0[i], uly.0[i]))
+            {
+                ls_ok[i] = true;
+                ls_wi.set_lane(i, ls.wi);
+                ls_li.set_lane(i, ls.li);
+                ls_pdf.0[i] = ls.pdf;
+                ls_dist.0[i] = ls.dist;
+                ls_delta[i] = ls.delta;
+            }
+        }
+        if area.iter().any(|&a| a) {
+            // `AreaLight::sample` with `sample_uniform_triangle`.
+            let m = F8::splat(0.5) * ulx.min(uly);
+            let b0 = ulx - m;
+            let b1 = uly - m;
+            let b2 = F8::splat(1.0) - b0 - b1;
+            let xp = a_p0 + a_e1 * b1 + a_e2 * b2;
+            let d = xp - si.p;
+            let dist2 = d.dot(d);
+            let dist = dist2.sqrt();
+            let wi = d / dist;
+            let cos_l = -a_n.dot(wi);
+            let c = cos_l.abs();
+            let pdf_a = dist2 / (c * a_area);
+            let ok: M8 = std::array::from_fn(|i| {
+                dist2.0[i] > 0.0
+                    && !(!a_two[i] && cos_l.0[i] <= 0.0)
+                    && !(c.0[i] <= 0.0)
+                    && pdf_a.0[i] > 0.0
+                    && pdf_a.0[i].is_finite()
+            });
+            let ok = and(area, ok);
+            let pdf = pmf * pdf_a;
+            for i in lanes_of(area) {
+                ls_ok[i] = ok[i];
+            }
+            ls_wi = V8::select(area, wi, ls_wi);
+            ls_pdf = select(area, pdf, ls_pdf);
+            ls_dist = select(area, dist, ls_dist);
+        }
+        let p_l = ls_pdf;
+        let usable: M8 = std::array::from_fn(|i| {
+            ls_ok[i] && !(p_l.0[i].is_nan() || p_l.0[i] <= 0.0) && ls_li.lane(i) != Rgb::ZERO
+        });
+        let wi_l = to_local(&fx, &fy, &n, ls_wi);
+        // Lambert: f = rho / pi above both horizons; times |cos|.
+        let above = and(not(wo.z.le(zero)), not(wi_l.z.le(zero)));
+        let f_d = rho * F8::splat(FRAC_1_PI);
+        let mut f = V8::select(above, f_d, V8::default()) * wi_l.z.abs();
+        let mut pdf_b = select(above, wi_l.z.max(zero) * F8::splat(FRAC_1_PI), zero);
+        for i in lanes_of(and(glossy, usable)) {
+            let (wo_i, wi_i) = (wo.lane(i), wi_l.lane(i));
+            f.set_lane(i, bsdf[i].f(wo_i, wi_i) * wi_i.z.abs());
+            pdf_b.0[i] = bsdf[i].pdf(wo_i, wi_i);
+        }
+        let shadow = and(usable, not(f.is_zero()));
+        let s_org = si.offset_origin(ls_wi);
+        let far =
+            F8(ls_dist
+                .0
+                .map(|d| if d.is_finite() { d * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY }));
+        let srays = RayPacket {
+            origin: [s_org.x.0, s_org.y.0, s_org.z.0],
+            dir: [ls_wi.x.0, ls_wi.y.0, ls_wi.z.0],
+            t_min: [0.0; LANES],
+            t_max: far.0,
+        };
+        let occluded = from_bits(ctx.accel.occluded_packet(&srays, bits(shadow)));
+        let lit = and(shadow, not(occluded));
+        let w_l = select(ls_delta, F8::splat(1.0), power_heuristic8(p_l, pdf_b));
+        let contrib = V8::select(lit, f * ls_li * (w_l / p_l), V8::default());
+        // The light reaches the eye over vertices 0..=vertex: component of vertex + 1.
+        let add = beta * contrib;
+        if vertex < 1 {
+            l_direct = V8::select(act, l_direct + add, l_direct);
+        } else {
+            l_indirect = V8::select(act, l_indirect + add, l_indirect);
+        }
+
+        // BSDF sampling for the next direction (cosine hemisphere in lanes for Lambert).
+        let mut bs_wi = sample_cosine_hemisphere8(ubx, uby);
+        let mut bs_pdf = bs_wi.z.max(zero) * F8::splat(FRAC_1_PI);
+        let mut bs_f = f_d;
+        let mut bs_ok = and(not(wo.z.le(zero)), not(bs_pdf.le(zero)));
+        let mut bs_spec = [false; LANES];
+        for i in lanes_of(glossy) {
+            match bsdf[i].sample(wo.lane(i), Vec2::new(ubx.0[i], uby.0[i]), u_lobe.0[i]) {
+                Some(bs) => {
+                    bs_ok[i] = true;
+                    bs_wi.set_lane(i, bs.wi);
+                    bs_f.set_lane(i, bs.f);
+                    bs_pdf.0[i] = bs.pdf;
+                    bs_spec[i] = bs.specular;
+                }
+                None => bs_ok[i] = false,
+            }
+        }
+        let mut cont = and(act, bs_ok);
+        let wi = to_world(&fx, &fy, &n, bs_wi);
+        let new_beta = beta * (bs_f * (bs_wi.z.abs() / bs_pdf));
+        beta = V8::select(cont, new_beta, beta);
+        p_b = select(cont, bs_pdf, p_b);
+        for i in lanes_of(cont) {
+            specular[i] = bs_spec[i];
+        }
+        prev_p = V8::select(cont, si.p, prev_p);
+        cont = and(cont, and(not(beta.is_zero()), beta.is_finite()));
+        let org = si.offset_origin(wi);
+
+        // Russian roulette once the path has rr_depth segments.
+        if vertex + 2 >= params.rr_depth {
+            let q = beta.max_element().min(F8::splat(0.95));
+            let u_rr = sampler.next_1d(vertex_slot(vertex) + SLOT_RR);
+            cont = and(cont, not(u_rr.ge(q)));
+            beta = V8::select(cont, beta / q, beta);
+        }
+        vertex += 1;
+        act = cont;
+        if !act.iter().any(|&a| a) {
+            break;
+        }
+
+        // Find the next vertex; a miss adds the environment, MIS-weighted.
+        rays.origin = [org.x.0, org.y.0, org.z.0];
+        rays.dir = [wi.x.0, wi.y.0, wi.z.0];
+        let hits = ctx.accel.intersect_packet(&rays, bits(act));
+        let (next, found) = from_hits(ctx, &wi, &hits);
+        let missed = and(act, not(found));
+        if ctx.lights.has_environment() {
+            for i in lanes_of(missed) {
+                let w = wi.lane(i);
+                let le = ctx.lights.environment_radiance(w);
+                if le != Rgb::ZERO {
+                    let w_b = if specular[i] {
+                        1.0
+                    } else {
+                        power_heuristic(1.0, p_b.0[i], 1.0, ctx.lights.pdf_environment(w))
+                    };
+                    let l = beta.lane(i) * w_b * le;
+                    if vertex <= 1 {
+                        l_direct.set_lane(i, l_direct.lane(i) + l);
+                    } else {
+                        l_indirect.set_lane(i, l_indirect.lane(i) + l);
+                    }
+                }
+            }
+        }
+        act = and(act, found);
+        si = next;
+        if !act.iter().any(|&a| a) {
+            break;
+        }
+    }
+
+    for i in lanes_of(hit) {
+        out[i].radiance = Split { direct: l_direct.lane(i), indirect: l_indirect.lane(i) };
+    }
+    out
+}

@@ -53,6 +53,8 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx2_packet;
 pub mod bench;
 mod brute;
 mod packet;

@@ -7,7 +7,9 @@
 //! and ids, and the same answer for invalid rays (NaN or infinite components, zero
 //! direction: no hit, not occluded).
 
-use crate::{Hit, SceneAccel};
+#[cfg(target_arch = "x86_64")]
+use crate::{avx2_packet, Simd};
+use crate::{object_ray, Blas, Hit, SceneAccel, MERGED};
 use filtrace_core::{Ray, Vec3};
 
 /// Number of rays in a packet.
@@ -102,16 +104,42 @@ impl SceneAccel {
     /// Closest hits of the lanes whose bit is set in `active`; bit i of the result's `mask`
     /// is set iff lane i is active and hit; per lane identical to `intersect`.
     pub fn intersect_packet(&self, rays: &RayPacket, active: u8) -> HitPacket {
+        let active = active & valid_lanes(rays);
+        if active == 0 {
+            return HitPacket::default();
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.simd == Simd::Avx2 {
+            if let Some((object, rays, active)) = self.flat_object(rays, active) {
+                // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
+                return unsafe { self.intersect_packet_flat_avx2(object, &rays, active) };
+            }
+        }
         self.intersect_packet_lanes(rays, active)
     }
 
     /// Bit i set iff lane i is active and occluded; per lane identical to `occluded`.
     pub fn occluded_packet(&self, rays: &RayPacket, active: u8) -> u8 {
+        let active = active & valid_lanes(rays);
+        if active == 0 {
+            return 0;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.simd == Simd::Avx2 {
+            if let Some((object, rays, active)) = self.flat_object(rays, active) {
+                let blas = self.object_blas(object);
+                // SAFETY: as in `intersect_packet`.
+                return unsafe {
+                    let p = avx2_packet::Packet8::new(&rays, active, blas);
+                    avx2_packet::occluded_flat(blas, &p) as u8
+                };
+            }
+        }
         self.occluded_packet_lanes(rays, active)
     }
 
     /// [`SceneAccel::intersect_packet`] as one single-ray query per active lane (the
-    /// reference of the tests).
+    /// reference of the tests, and the path of scenes without a packet kernel).
     pub fn intersect_packet_lanes(&self, rays: &RayPacket, active: u8) -> HitPacket {
         let mut out = HitPacket::default();
         for i in (0..LANES).filter(|i| active & (1 << i) != 0) {
@@ -121,12 +149,82 @@ impl SceneAccel {
     }
 
     /// [`SceneAccel::occluded_packet`] as one single-ray query per active lane (the
-    /// reference of the tests).
+    /// reference of the tests, and the path of scenes without a packet kernel).
     pub fn occluded_packet_lanes(&self, rays: &RayPacket, active: u8) -> u8 {
         (0..LANES)
             .filter(|&i| active & (1 << i) != 0 && self.occluded(&rays.lane(i)))
             .fold(0, |m, i| m | (1 << i))
     }
+
+    /// When the scene is a single object with a flat bottom level (the Cornell box): that
+    /// object, the rays in its object space, and the lanes whose rays could be moved there
+    /// (`object_ray` fails for the same lanes as in the single-ray query).
+    fn flat_object(&self, rays: &RayPacket, active: u8) -> Option<(u32, RayPacket, u8)> {
+        let object = self.single?;
+        if !self.object_blas(object).flat {
+            return None;
+        }
+        if object == MERGED {
+            return Some((object, *rays, active));
+        }
+        let rec = &self.instances[object as usize];
+        if rec.identity {
+            return Some((object, *rays, active));
+        }
+        let mut local = *rays;
+        let mut ok = 0u8;
+        for i in (0..LANES).filter(|i| active & (1 << i) != 0) {
+            let ray = rays.lane(i);
+            if let Some((o, d)) = object_ray(&rec.world_to_object, rec.identity, &ray) {
+                local.set_lane(i, &Ray { origin: o, dir: d, ..ray });
+                ok |= 1 << i;
+            }
+        }
+        Some((object, local, ok))
+    }
+
+    fn object_blas(&self, object: u32) -> &Blas {
+        if object == MERGED {
+            &self.merged
+        } else {
+            &self.blas[self.instances[object as usize].mesh as usize]
+        }
+    }
+
+    /// The closest-hit packet query on a flat object with AVX2.
+    ///
+    /// Safety: the CPU has AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn intersect_packet_flat_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> HitPacket {
+        let blas = self.object_blas(object);
+        let p = avx2_packet::Packet8::new(rays, active, blas);
+        let mut out = HitPacket::default();
+        if p.active() == 0 {
+            return out;
+        }
+        // SAFETY: this function runs with AVX2 and FMA.
+        let c = unsafe { avx2_packet::closest_flat(blas, &p) };
+        for i in 0..LANES {
+            let id = c.id.0[i];
+            if id == avx2_packet::NO_HIT {
+                continue;
+            }
+            let (instance, prim) =
+                if object == MERGED { self.merged_refs[id as usize] } else { (object, id as u32) };
+            out.mask |= 1 << i;
+            (out.t[i], out.u[i], out.v[i]) = (c.t.0[i], c.u.0[i], c.v.0[i]);
+            (out.instance[i], out.prim[i]) = (instance, prim);
+        }
+        out
+    }
+}
+
+/// Lanes whose rays are valid ([`Ray::is_valid`]: finite, non-zero direction, no NaN
+/// bounds); the others never hit, as in the single-ray queries.
+#[inline]
+fn valid_lanes(rays: &RayPacket) -> u8 {
+    (0..LANES).filter(|&i| rays.lane(i).is_valid()).fold(0, |m, i| m | (1 << i))
 }
 
 #[cfg(test)]

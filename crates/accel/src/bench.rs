@@ -8,11 +8,19 @@
 //!   uniform on the sphere, `t` in `[0, inf)`; cast as closest-hit and as any-hit
 //!   queries (the any-hit set uses the same rays, also with `t_max = inf`).
 //!
+//! - **shadow**: `rays` segments from origins uniform in the bounding box to points on a
+//!   small quad (a fifth of the box's x and z extent) just below the top of the box, as
+//!   towards a ceiling light, `t` in `[10^-4, 1 - 10^-4]`; any hit.
+//!
+//! The same sets are also cast as 8-ray packets ([`SceneAccel::intersect_packet`],
+//! [`SceneAccel::occluded_packet`]): primary rays in 4x2 pixel tiles, the other sets as
+//! eight consecutive rays (the `packet_*` fields).
+//!
 //! Rays are cast in parallel with rayon (chunks of 1024 rays) on the current pool;
 //! throughput is total rays / wall time, best of `repeats` runs.
 
 use crate::testmesh::SplitMix64;
-use crate::{BuildParams, SceneAccel};
+use crate::{BuildParams, RayPacket, SceneAccel, LANES};
 use filtrace_core::{Aabb, Ray, Vec3};
 use filtrace_scene::Scene;
 use rayon::prelude::*;
@@ -71,6 +79,25 @@ pub struct RayBenchReport {
     pub primary_hit_fraction: f64,
     pub incoherent_hit_fraction: f64,
     pub incoherent_any_hit_fraction: f64,
+    /// Shadow rays towards a small quad, single-ray any hit.
+    pub shadow_rays: usize,
+    pub shadow_any_mrays: f64,
+    pub shadow_any_mrays_per_cpu_s: Option<f64>,
+    pub shadow_hit_fraction: f64,
+    /// The same queries as 8-ray packets (hit fractions equal the single-ray ones: the
+    /// packet queries give the same answers).
+    pub packet_primary_closest_mrays: f64,
+    pub packet_incoherent_closest_mrays: f64,
+    pub packet_incoherent_any_mrays: f64,
+    pub packet_shadow_mrays: f64,
+    pub packet_primary_closest_mrays_per_cpu_s: Option<f64>,
+    pub packet_incoherent_closest_mrays_per_cpu_s: Option<f64>,
+    pub packet_incoherent_any_mrays_per_cpu_s: Option<f64>,
+    pub packet_shadow_mrays_per_cpu_s: Option<f64>,
+    pub packet_primary_hit_fraction: f64,
+    pub packet_incoherent_hit_fraction: f64,
+    pub packet_incoherent_any_hit_fraction: f64,
+    pub packet_shadow_hit_fraction: f64,
 }
 
 impl RayBenchReport {
@@ -105,6 +132,41 @@ impl RayBenchReport {
                 self.incoherent_any_hit_fraction,
                 self.incoherent_any_mrays,
                 self.incoherent_any_mrays_per_cpu_s,
+            ),
+            (
+                "shadow any",
+                self.shadow_rays,
+                self.shadow_hit_fraction,
+                self.shadow_any_mrays,
+                self.shadow_any_mrays_per_cpu_s,
+            ),
+            (
+                "packet primary closest",
+                self.primary_rays,
+                self.packet_primary_hit_fraction,
+                self.packet_primary_closest_mrays,
+                self.packet_primary_closest_mrays_per_cpu_s,
+            ),
+            (
+                "packet incoherent closest",
+                self.incoherent_rays,
+                self.packet_incoherent_hit_fraction,
+                self.packet_incoherent_closest_mrays,
+                self.packet_incoherent_closest_mrays_per_cpu_s,
+            ),
+            (
+                "packet incoherent any",
+                self.incoherent_rays,
+                self.packet_incoherent_any_hit_fraction,
+                self.packet_incoherent_any_mrays,
+                self.packet_incoherent_any_mrays_per_cpu_s,
+            ),
+            (
+                "packet shadow any",
+                self.shadow_rays,
+                self.packet_shadow_hit_fraction,
+                self.packet_shadow_mrays,
+                self.packet_shadow_mrays_per_cpu_s,
             ),
         ];
         for (name, n, hit, m, c) in rows {
@@ -174,6 +236,48 @@ pub fn incoherent_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
+/// `n` shadow segments from origins uniform in [`triangle_bounds`] to points on a small
+/// quad just below the top of the box (see the module docs).
+pub fn shadow_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = triangle_bounds(scene);
+    if b.is_empty() {
+        return Vec::new();
+    }
+    let e = b.extent();
+    let c = Vec3::new(b.center().x, b.max.y - 0.01 * e.y, b.center().z);
+    let mut rng = SplitMix64(seed ^ 0x5AD0);
+    (0..n)
+        .map(|_| {
+            let o = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * e;
+            let q = c + Vec3::new(rng.next_f32() - 0.5, 0.0, rng.next_f32() - 0.5) * 0.2 * e;
+            Ray::segment(o, q - o, 1e-4, 1.0 - 1e-4)
+        })
+        .collect()
+}
+
+/// Groups `rays` into packets of eight consecutive rays (the last one partial).
+pub fn packets_of(rays: &[Ray]) -> Vec<(RayPacket, u8)> {
+    rays.chunks(LANES).map(RayPacket::from_rays).collect()
+}
+
+/// Groups row-major `width x height` camera rays into packets of 4x2 pixel tiles.
+pub fn tile_packets(rays: &[Ray], width: usize, height: usize) -> Vec<(RayPacket, u8)> {
+    let mut out = Vec::with_capacity(rays.len().div_ceil(LANES));
+    for y in (0..height).step_by(2) {
+        for x in (0..width).step_by(4) {
+            let tile: Vec<Ray> = (0..LANES)
+                .map(|i| (x + i % 4, y + i / 4))
+                .filter(|&(px, py)| px < width && py < height)
+                .filter_map(|(px, py)| rays.get(py * width + px).copied())
+                .collect();
+            if !tile.is_empty() {
+                out.push(RayPacket::from_rays(&tile));
+            }
+        }
+    }
+    out
+}
+
 /// CPU time consumed so far by all threads of this process, in seconds, from
 /// `/proc/self/task/*/schedstat` (nanosecond run time; Linux only, `None` elsewhere).
 /// On a shared machine, rays per CPU-second is far steadier than rays per wall second.
@@ -217,6 +321,38 @@ fn measure(rays: &[Ray], repeats: usize, query: impl Fn(&Ray) -> bool + Sync) ->
     }
 }
 
+/// Casts `packets` in parallel with `query` (the mask of lanes that hit).
+fn measure_packets(
+    packets: &[(RayPacket, u8)],
+    repeats: usize,
+    query: impl Fn(&RayPacket, u8) -> u8 + Sync,
+) -> Measured {
+    let n: usize = packets.iter().map(|p| p.1.count_ones() as usize).sum();
+    if n == 0 {
+        return Measured { mrays: 0.0, mrays_per_cpu_s: None, hit_fraction: 0.0 };
+    }
+    let (mut wall, mut cpu) = (f64::INFINITY, None::<f64>);
+    let mut hits = 0;
+    for _ in 0..repeats.max(1) {
+        let cpu0 = process_cpu_seconds();
+        let start = Instant::now();
+        hits = packets
+            .par_chunks(128)
+            .map(|c| c.iter().map(|(p, a)| query(p, *a).count_ones() as usize).sum::<usize>())
+            .sum::<usize>();
+        wall = wall.min(start.elapsed().as_secs_f64());
+        if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
+            cpu = Some(cpu.map_or(b - a, |c| c.min(b - a)));
+        }
+    }
+    let n = n as f64;
+    Measured {
+        mrays: n / wall / 1e6,
+        mrays_per_cpu_s: cpu.map(|c| n / c / 1e6),
+        hit_fraction: hits as f64 / n,
+    }
+}
+
 /// Builds the acceleration structure of `scene` and measures ray throughput (see the
 /// module docs for the ray sets).
 pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
@@ -230,6 +366,14 @@ pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
     let p = measure(&primary, opts.repeats, |r| accel.intersect(r).is_some());
     let ic = measure(&incoherent, opts.repeats, |r| accel.intersect(r).is_some());
     let ia = measure(&incoherent, opts.repeats, |r| accel.occluded(r));
+    let shadow = shadow_rays(scene, opts.rays, opts.seed);
+    let sa = measure(&shadow, opts.repeats, |r| accel.occluded(r));
+    let (primary8, incoherent8, shadow8) =
+        (tile_packets(&primary, opts.width, opts.height), packets_of(&incoherent), packets_of(&shadow));
+    let pp = measure_packets(&primary8, opts.repeats, |p, a| accel.intersect_packet(p, a).mask);
+    let pic = measure_packets(&incoherent8, opts.repeats, |p, a| accel.intersect_packet(p, a).mask);
+    let pia = measure_packets(&incoherent8, opts.repeats, |p, a| accel.occluded_packet(p, a));
+    let ps = measure_packets(&shadow8, opts.repeats, |p, a| accel.occluded_packet(p, a));
     RayBenchReport {
         scene: scene.name.clone(),
         triangles: accel.triangle_count(),
@@ -247,5 +391,21 @@ pub fn ray_bench(scene: &Scene, opts: &RayBenchOptions) -> RayBenchReport {
         primary_hit_fraction: p.hit_fraction,
         incoherent_hit_fraction: ic.hit_fraction,
         incoherent_any_hit_fraction: ia.hit_fraction,
+        shadow_rays: shadow.len(),
+        shadow_any_mrays: sa.mrays,
+        shadow_any_mrays_per_cpu_s: sa.mrays_per_cpu_s,
+        shadow_hit_fraction: sa.hit_fraction,
+        packet_primary_closest_mrays: pp.mrays,
+        packet_incoherent_closest_mrays: pic.mrays,
+        packet_incoherent_any_mrays: pia.mrays,
+        packet_shadow_mrays: ps.mrays,
+        packet_primary_closest_mrays_per_cpu_s: pp.mrays_per_cpu_s,
+        packet_incoherent_closest_mrays_per_cpu_s: pic.mrays_per_cpu_s,
+        packet_incoherent_any_mrays_per_cpu_s: pia.mrays_per_cpu_s,
+        packet_shadow_mrays_per_cpu_s: ps.mrays_per_cpu_s,
+        packet_primary_hit_fraction: pp.hit_fraction,
+        packet_incoherent_hit_fraction: pic.hit_fraction,
+        packet_incoherent_any_hit_fraction: pia.hit_fraction,
+        packet_shadow_hit_fraction: ps.hit_fraction,
     }
 }

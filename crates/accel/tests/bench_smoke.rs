@@ -20,10 +20,21 @@ fn ray_bench_reports_consistent_numbers() {
     }
     // Same rays, same t range: any-hit and closest-hit must agree on what hits.
     assert_eq!(r.incoherent_hit_fraction, r.incoherent_any_hit_fraction);
+    // Packets give the answers of single rays.
+    assert_eq!(r.packet_primary_hit_fraction, r.primary_hit_fraction);
+    assert_eq!(r.packet_incoherent_hit_fraction, r.incoherent_hit_fraction);
+    assert_eq!(r.packet_incoherent_any_hit_fraction, r.incoherent_any_hit_fraction);
+    assert_eq!(r.packet_shadow_hit_fraction, r.shadow_hit_fraction);
+    assert_eq!(r.shadow_rays, opts.rays);
+    assert!(r.shadow_hit_fraction > 0.05 && r.shadow_hit_fraction < 0.95, "{}", r.shadow_hit_fraction);
+    for m in [r.shadow_any_mrays, r.packet_primary_closest_mrays, r.packet_shadow_mrays] {
+        assert!(m.is_finite() && m > 0.0);
+    }
     // The camera frames the object: a good share of pixels see it, not all.
     assert!(r.primary_hit_fraction > 0.2 && r.primary_hit_fraction < 0.9, "{}", r.primary_hit_fraction);
     let md = r.to_markdown();
     assert!(md.contains("incoherent closest") && md.contains("| primary closest |"));
+    assert!(md.contains("| packet shadow any |"));
     let json = serde_json::to_string(&r).unwrap();
     assert!(json.contains("\"incoherent_any_mrays\""));
 }

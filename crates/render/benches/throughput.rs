@@ -1,11 +1,11 @@
 //! Headline throughput: samples per second on the built-in Cornell box at 512 x 512,
 //! max depth 8, on local rayon pools of 1 and 2 threads (build time excluded).
 //!
-//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...] [scalar|lockstep|portable] [lanes]]`
+//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...] [scalar|lockstep|portable] [packets] [lanes]]`
 //! (default 16 spp, threads 1 2, the renderer's default trace mode). Prints one line per
 //! thread count and a JSON line; `lanes` also prints the lockstep lane utilisation.
 
-use filtrace_render::{render_bench, RenderSettings, Renderer, TraceMode};
+use filtrace_render::{render_bench, RayQueries, RenderSettings, Renderer, TraceMode};
 
 fn main() {
     // cargo bench passes `--bench`; ignore flags.
@@ -26,9 +26,13 @@ fn main() {
             renderer = renderer.with_trace_mode(mode);
         }
     }
+    if has("packets") {
+        renderer = renderer.with_ray_queries(RayQueries::Packet);
+    }
     println!(
-        "cornell 512x512 spp {spp} max_depth 8, trace mode {:?}, build {:.3} ms",
+        "cornell 512x512 spp {spp} max_depth 8, trace mode {:?}, ray queries {:?}, build {:.3} ms",
         renderer.trace_mode(),
+        renderer.ray_queries(),
         renderer.build_seconds() * 1e3
     );
     if has("lanes") {

@@ -21,7 +21,7 @@ pub mod texture;
 
 pub use camera::PinholeCamera;
 pub use film::{Aovs, Film, VisibleSurface};
-pub use integrator::lockstep::LaneStats;
+pub use integrator::lockstep::{LaneStats, RayQueries};
 pub use integrator::PathParams;
 pub use renderer::{
     render_bench, BenchResult, IntegratorKind, RenderError, RenderSettings, Renderer, TraceMode,

@@ -23,7 +23,7 @@
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
 use crate::integrator::lanes::LANES;
-use crate::integrator::lockstep::{self, LaneStats, LockstepContext};
+use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
 use crate::integrator::{self, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
 use crate::surface::SceneGeometry;
@@ -152,6 +152,7 @@ pub struct Renderer {
     camera: PinholeCamera,
     integrator: IntegratorKind,
     trace_mode: TraceMode,
+    ray_queries: RayQueries,
     build_seconds: f64,
 }
 
@@ -176,6 +177,7 @@ impl Renderer {
             camera,
             integrator: IntegratorKind::Path,
             trace_mode: TraceMode::default(),
+            ray_queries: RayQueries::default(),
             build_seconds,
         })
     }
@@ -191,6 +193,17 @@ impl Renderer {
     pub fn with_trace_mode(mut self, mode: TraceMode) -> Self {
         self.trace_mode = mode;
         self
+    }
+
+    /// How the lockstep tracer queries the BVH (packet kernels or one query per lane; same
+    /// film).
+    pub fn with_ray_queries(mut self, q: RayQueries) -> Self {
+        self.ray_queries = q;
+        self
+    }
+
+    pub fn ray_queries(&self) -> RayQueries {
+        self.ray_queries
     }
 
     pub fn trace_mode(&self) -> TraceMode {
@@ -390,7 +403,12 @@ impl Renderer {
         stats: &mut LaneStats,
     ) {
         let width = self.settings.width as usize;
-        let lc = LockstepContext { ctx: self.context(), params: self.path_params(), camera: &self.camera };
+        let lc = LockstepContext {
+            ctx: self.context(),
+            params: self.path_params(),
+            camera: &self.camera,
+            queries: self.ray_queries,
+        };
         for (row, row_pixels) in pixels.chunks_mut(width).enumerate() {
             let y = (y0 + row) as u32;
             for (g, group) in row_pixels.chunks_mut(LANES).enumerate() {

@@ -5,14 +5,17 @@
 //! order, a wrong mask, a lane written twice) changes some bits, so this cheap test is
 //! the exactness contract of `integrator::lockstep`.
 
-use filtrace_render::{Film, PathParams, RenderSettings, Renderer, TraceMode};
+use filtrace_render::{Film, PathParams, RayQueries, RenderSettings, Renderer, TraceMode};
 use filtrace_scene::Scene;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 /// Renders samples `[first, first + count)` then `[first + count, end)` in two passes.
-fn render(scene: &Scene, settings: &RenderSettings, mode: TraceMode) -> Film {
-    let r = Renderer::new(scene.clone(), settings.clone()).unwrap().with_trace_mode(mode);
+fn render(scene: &Scene, settings: &RenderSettings, mode: TraceMode, queries: RayQueries) -> Film {
+    let r = Renderer::new(scene.clone(), settings.clone())
+        .unwrap()
+        .with_trace_mode(mode)
+        .with_ray_queries(queries);
     let mut film = r.new_film();
     let cancel = AtomicBool::new(false);
     let half = settings.spp / 2;
@@ -45,17 +48,21 @@ fn film_bits(f: &Film) -> Vec<u64> {
 fn assert_identical(name: &str, scene: &Scene, width: u32, height: u32, spp: u32) {
     for params in PathParams::presets() {
         let settings = RenderSettings { width, height, spp, max_depth: params.max_depth, seed: 7 };
-        let scalar = render(scene, &settings, TraceMode::Scalar);
+        let scalar = render(scene, &settings, TraceMode::Scalar, RayQueries::PerLane);
         assert!(scalar.total_samples() > 0);
-        for mode in [TraceMode::Lockstep, TraceMode::LockstepPortable] {
-            let lock = render(scene, &settings, mode);
+        for (mode, queries) in [
+            (TraceMode::Lockstep, RayQueries::PerLane),
+            (TraceMode::LockstepPortable, RayQueries::PerLane),
+            (TraceMode::Lockstep, RayQueries::Packet),
+        ] {
+            let lock = render(scene, &settings, mode, queries);
             let (a, b) = (film_bits(&scalar), film_bits(&lock));
             if a != b {
                 let first = a.iter().zip(&b).position(|(x, y)| x != y).unwrap();
                 let per_pixel = a.len() / scalar.pixels().len();
                 let px = first / per_pixel;
                 panic!(
-                    "{name}, max_depth {}, {mode:?}: films differ, first at pixel ({}, {}), field {}:\nscalar   {:?}\nlockstep {:?}",
+                    "{name}, max_depth {}, {mode:?}, {queries:?}: films differ, first at pixel ({}, {}), field {}:\nscalar   {:?}\nlockstep {:?}",
                     params.max_depth,
                     px % width as usize,
                     px / width as usize,

@@ -17,9 +17,10 @@
 
 use crate::packet::{RayPacket, LANES};
 use crate::tri4::Tri4;
-use crate::triangle::{intersect_watertight, WatertightRay};
-use crate::wide::ray_touches_box;
+use crate::triangle::{intersect_watertight, Tri, WatertightRay};
+use crate::wide::{CULL_SCALE, FAR_SCALE};
 use crate::Blas;
+use filtrace_core::Aabb;
 use std::arch::x86_64::*;
 
 /// Eight lanes, 32-byte aligned (for aligned vector loads and stores).
@@ -44,103 +45,163 @@ pub(crate) struct Closest8 {
     pub id: I8,
 }
 
-/// The rays of a packet prepared for the watertight test, in object space.
-pub(crate) struct Packet8 {
+/// The rays of a packet prepared for the watertight test, in object space, in registers.
+#[derive(Clone, Copy)]
+struct Regs<'a> {
+    /// The rays (for the scalar edge fallback).
+    rays: &'a RayPacket,
     /// Lanes to trace: active, valid, and touching the mesh bounds.
     active: u32,
-    /// Scalar constants per lane (for the edge fallback; default in inactive lanes).
-    wr: [WatertightRay; LANES],
     /// `org[kx], org[ky], org[kz]` and `S_x, S_y, S_z` per lane.
-    o: [F8; 3],
-    s: [F8; 3],
-    t_min: F8,
-    t_max: F8,
-    /// `k[j][i]`: axis `kx` (j = 0), `ky` (1), `kz` (2) of lane `i`.
-    k: [[u8; LANES]; 3],
+    o: [__m256; 3],
+    s: [__m256; 3],
+    t_min: __m256,
+    t_max: __m256,
+    /// All ones in active lanes.
+    act: __m256,
+    /// Per permuted axis `j` (`kx, ky, kz`): lanes whose axis is 1, lanes whose axis is 2.
+    sel: [[__m256; 2]; 3],
     /// All active lanes share this permutation.
     uniform: Option<[usize; 3]>,
 }
 
-impl Packet8 {
-    /// Lanes of `rays` set in `active`, culled by the bounds of `blas` exactly as the
-    /// single-ray query culls them (`ray_touches_box`). Rays must be valid.
-    pub fn new(rays: &RayPacket, active: u8, blas: &Blas) -> Self {
-        let wr0 = WatertightRay { org: [0.0; 3], kx: 0, ky: 1, kz: 2, sx: 0.0, sy: 0.0, sz: 0.0 };
-        let mut p = Self {
-            active: 0,
-            wr: [wr0; LANES],
-            o: [F8::default(); 3],
-            s: [F8::default(); 3],
-            t_min: F8::default(),
-            t_max: F8::default(),
-            k: [[0; LANES]; 3],
-            uniform: None,
-        };
-        let mut perm: Option<[usize; 3]> = None;
-        let mut uniform = true;
-        for i in (0..LANES).filter(|i| active & (1 << i) != 0) {
-            let r = rays.lane(i);
-            if !ray_touches_box(r.origin, r.dir, r.t_min, r.t_max, &blas.bounds) {
-                continue;
-            }
-            let wr = WatertightRay::new(r.origin, r.dir);
-            let k = [wr.kx, wr.ky, wr.kz];
-            uniform &= perm.is_none_or(|q| q == k);
-            perm = Some(k);
-            for (j, &a) in k.iter().enumerate() {
-                p.o[j].0[i] = wr.org[a];
-                p.k[j][i] = a as u8;
-            }
-            p.s[0].0[i] = wr.sx;
-            p.s[1].0[i] = wr.sy;
-            p.s[2].0[i] = wr.sz;
-            p.t_min.0[i] = r.t_min;
-            p.t_max.0[i] = r.t_max;
-            p.wr[i] = wr;
-            p.active |= 1 << i;
-        }
-        p.uniform = if uniform { perm } else { None };
-        p
-    }
+/// True lanes where `x` is finite.
+#[inline(always)]
+unsafe fn finite(x: __m256) -> __m256 {
+    let abs = _mm256_and_ps(x, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff)));
+    _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(f32::INFINITY))
+}
 
-    /// Lanes left after the bounds check.
-    pub fn active(&self) -> u32 {
-        self.active
+/// Per lane, `x`, `y` or `z` where the lane's axis is 0, 1 (`is1`) or 2 (`is2`).
+#[inline(always)]
+unsafe fn pick(x: __m256, y: __m256, z: __m256, is1: __m256, is2: __m256) -> __m256 {
+    _mm256_blendv_ps(_mm256_blendv_ps(x, y, is1), z, is2)
+}
+
+/// Loads eight unaligned floats.
+#[inline(always)]
+unsafe fn ld(x: &[f32; LANES]) -> __m256 {
+    // SAFETY: reads the 32 bytes of `x`.
+    unsafe { _mm256_loadu_ps(x.as_ptr()) }
+}
+
+/// Prepares the lanes of `rays` set in `active`, all eight at once, with the decisions of
+/// the single-ray query, lane for lane: `Ray::is_valid`, the bounds check of a flat mesh
+/// (`wide::ray_touches_box`, the same operations) and the watertight permutation and shear
+/// (`WatertightRay::new`, the same selection rules and roundings).
+#[inline(always)]
+unsafe fn setup<'a>(rays: &'a RayPacket, active: u32, b: &Aabb) -> Regs<'a> {
+    let [ox, oy, oz] = [ld(&rays.origin[0]), ld(&rays.origin[1]), ld(&rays.origin[2])];
+    let [dx, dy, dz] = [ld(&rays.dir[0]), ld(&rays.dir[1]), ld(&rays.dir[2])];
+    let (t_min, t_max) = (ld(&rays.t_min), ld(&rays.t_max));
+    let zero = _mm256_setzero_ps();
+    // `Ray::is_valid`: finite origin and direction, non-zero direction, no NaN bounds.
+    let finite_o = _mm256_and_ps(_mm256_and_ps(finite(ox), finite(oy)), finite(oz));
+    let finite_d = _mm256_and_ps(_mm256_and_ps(finite(dx), finite(dy)), finite(dz));
+    let nonzero = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_NEQ_OQ>(dx, zero), _mm256_cmp_ps::<_CMP_NEQ_OQ>(dy, zero)),
+        _mm256_cmp_ps::<_CMP_NEQ_OQ>(dz, zero),
+    );
+    let valid = _mm256_and_ps(
+        _mm256_and_ps(finite_o, finite_d),
+        _mm256_and_ps(nonzero, _mm256_cmp_ps::<_CMP_ORD_Q>(t_min, t_max)),
+    );
+    // `ray_touches_box`: origin inside, or the slab test with the culling slack.
+    let (lo, hi) = (b.min.to_array(), b.max.to_array());
+    let inside = {
+        _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(ox, _mm256_set1_ps(lo[0])),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(ox, _mm256_set1_ps(hi[0])),
+                ),
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(oy, _mm256_set1_ps(lo[1])),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(oy, _mm256_set1_ps(hi[1])),
+                ),
+            ),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(oz, _mm256_set1_ps(lo[2])),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(oz, _mm256_set1_ps(hi[2])),
+            ),
+        )
+    };
+    let one = _mm256_set1_ps(1.0);
+    let mut t_near = t_min;
+    let mut t_far = _mm256_max_ps(_mm256_mul_ps(t_max, _mm256_set1_ps(CULL_SCALE)), t_max);
+    for (k, (o, d)) in [(ox, dx), (oy, dy), (oz, dz)].into_iter().enumerate() {
+        let inv = _mm256_div_ps(one, d);
+        let l = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[k]), o), inv);
+        let h = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[k]), o), inv);
+        let pos = _mm256_cmp_ps::<_CMP_GE_OQ>(inv, zero);
+        // `max(a, b)` is `a > b ? a : b` and `min(a, b)` is `a < b ? a : b`: the scalar
+        // test's selections, NaN slabs included.
+        t_near = _mm256_max_ps(_mm256_blendv_ps(h, l, pos), t_near);
+        t_far = _mm256_min_ps(_mm256_blendv_ps(l, h, pos), t_far);
+    }
+    let touch = _mm256_cmp_ps::<_CMP_LE_OQ>(t_near, _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE)));
+    let act = _mm256_and_ps(_mm256_and_ps(valid, lane_mask(active)), _mm256_or_ps(inside, touch));
+    // `WatertightRay::new`: `kz` the axis of largest |d| (first on ties), `kx, ky` the
+    // next ones, swapped when `d[kz] < 0`; `S_z = 1 / d[kz]`, `S_x = d[kx] S_z`, ...
+    let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let (ax, ay, az) = (_mm256_and_ps(dx, abs), _mm256_and_ps(dy, abs), _mm256_and_ps(dz, abs));
+    let x_max = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ax, ay), _mm256_cmp_ps::<_CMP_GE_OQ>(ax, az));
+    let z_over_y = _mm256_cmp_ps::<_CMP_LT_OQ>(ay, az);
+    let kz0 = x_max;
+    let kz2 = _mm256_andnot_ps(x_max, z_over_y);
+    let kz1 = _mm256_andnot_ps(x_max, _mm256_andnot_ps(z_over_y, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+    let dkz = pick(dx, dy, dz, kz1, kz2);
+    let swap = _mm256_cmp_ps::<_CMP_LT_OQ>(dkz, zero);
+    let sel = [
+        [_mm256_blendv_ps(kz0, kz2, swap), _mm256_blendv_ps(kz1, kz0, swap)],
+        [_mm256_blendv_ps(kz2, kz0, swap), _mm256_blendv_ps(kz0, kz1, swap)],
+        [kz1, kz2],
+    ];
+    let sz = _mm256_div_ps(one, dkz);
+    let sx = _mm256_mul_ps(pick(dx, dy, dz, sel[0][0], sel[0][1]), sz);
+    let sy = _mm256_mul_ps(pick(dx, dy, dz, sel[1][0], sel[1][1]), sz);
+    let o = [
+        pick(ox, oy, oz, sel[0][0], sel[0][1]),
+        pick(ox, oy, oz, sel[1][0], sel[1][1]),
+        pick(ox, oy, oz, sel[2][0], sel[2][1]),
+    ];
+    let active = _mm256_movemask_ps(act) as u32;
+    // One permutation for all active lanes: each axis mask is all or nothing of them.
+    let bits = [
+        [_mm256_movemask_ps(sel[0][0]) as u32 & active, _mm256_movemask_ps(sel[0][1]) as u32 & active],
+        [_mm256_movemask_ps(sel[1][0]) as u32 & active, _mm256_movemask_ps(sel[1][1]) as u32 & active],
+        [_mm256_movemask_ps(sel[2][0]) as u32 & active, _mm256_movemask_ps(sel[2][1]) as u32 & active],
+    ];
+    let all_or_none = |m: u32| m == 0 || m == active;
+    let uniform = bits.iter().flatten().all(|&m| all_or_none(m));
+    let axis = |b: [u32; 2]| {
+        if b[0] != 0 {
+            1
+        } else if b[1] != 0 {
+            2
+        } else {
+            0
+        }
+    };
+    Regs {
+        rays,
+        active,
+        o,
+        s: [sx, sy, sz],
+        t_min,
+        t_max,
+        act,
+        sel,
+        uniform: uniform.then(|| [axis(bits[0]), axis(bits[1]), axis(bits[2])]),
     }
 }
 
-/// Register form of a [`Packet8`].
-#[derive(Clone, Copy)]
-struct Regs {
-    o: [__m256; 3],
-    s: [__m256; 3],
-    t_min: __m256,
-    /// All ones in active lanes.
-    act: __m256,
-    /// Per permuted axis `j`: lanes whose axis is 1, lanes whose axis is 2.
-    sel: [[__m256; 2]; 3],
-}
-
-impl Regs {
-    #[inline(always)]
-    unsafe fn new(p: &Packet8) -> Self {
-        // SAFETY (all loads): `F8`/`I8` are 32-byte aligned.
-        let ld = |x: &F8| unsafe { _mm256_load_ps(x.0.as_ptr()) };
-        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        let lanes = |m: u32| {
-            let v = _mm256_and_si256(_mm256_set1_epi32(m as i32), bits);
-            _mm256_castsi256_ps(_mm256_cmpeq_epi32(v, bits))
-        };
-        let axis_is =
-            |j: usize, a: u8| lanes((0..LANES).filter(|&i| p.k[j][i] == a).fold(0, |m, i| m | (1 << i)));
-        Self {
-            o: [ld(&p.o[0]), ld(&p.o[1]), ld(&p.o[2])],
-            s: [ld(&p.s[0]), ld(&p.s[1]), ld(&p.s[2])],
-            t_min: ld(&p.t_min),
-            act: lanes(p.active),
-            sel: [0, 1, 2].map(|j| [axis_is(j, 1), axis_is(j, 2)]),
-        }
-    }
+/// All ones in the lanes whose bit is set in `m`.
+#[inline(always)]
+unsafe fn lane_mask(m: u32) -> __m256 {
+    let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let v = _mm256_and_si256(_mm256_set1_epi32(m as i32), bits);
+    _mm256_castsi256_ps(_mm256_cmpeq_epi32(v, bits))
 }
 
 /// Corner `c` of triangle `l` of packet `tri`, permuted per lane: `(v[kx], v[ky], v[kz])`.
@@ -149,15 +210,19 @@ unsafe fn corner<const UNIFORM: bool>(
     tri: &Tri4,
     c: usize,
     l: usize,
-    r: &Regs,
+    r: &Regs<'_>,
     k: [usize; 3],
 ) -> [__m256; 3] {
     let v = &tri.v[c];
     if UNIFORM {
-        return k.map(|a| _mm256_set1_ps(v[a][l]));
+        return [_mm256_set1_ps(v[k[0]][l]), _mm256_set1_ps(v[k[1]][l]), _mm256_set1_ps(v[k[2]][l])];
     }
     let (x, y, z) = (_mm256_set1_ps(v[0][l]), _mm256_set1_ps(v[1][l]), _mm256_set1_ps(v[2][l]));
-    [0, 1, 2].map(|j| _mm256_blendv_ps(_mm256_blendv_ps(x, y, r.sel[j][0]), z, r.sel[j][1]))
+    [
+        _mm256_blendv_ps(_mm256_blendv_ps(x, y, r.sel[0][0]), z, r.sel[0][1]),
+        _mm256_blendv_ps(_mm256_blendv_ps(x, y, r.sel[1][0]), z, r.sel[1][1]),
+        _mm256_blendv_ps(_mm256_blendv_ps(x, y, r.sel[2][0]), z, r.sel[2][1]),
+    ]
 }
 
 /// The watertight test of one triangle against the eight lanes, as `avx2::test8v` per
@@ -167,7 +232,7 @@ unsafe fn corner<const UNIFORM: bool>(
 unsafe fn test_tri<const UNIFORM: bool>(
     tri: &Tri4,
     l: usize,
-    r: &Regs,
+    r: &Regs<'_>,
     k: [usize; 3],
 ) -> (__m256, __m256, __m256, __m256, __m256) {
     let [ox, oy, oz] = r.o;
@@ -208,25 +273,29 @@ unsafe fn test_tri<const UNIFORM: bool>(
     (edge, reject, t, _mm256_mul_ps(v, rcp), _mm256_mul_ps(w, rcp))
 }
 
-/// Closest hits of the packet's lanes among all triangles of the flat `blas` (ids are
-/// its `prim_ids` values; on equal `t` the smallest id wins, as in the single-ray query).
+/// Closest hits of the lanes of `rays` set in `active` among all triangles of the flat
+/// `blas` (ids are its `prim_ids` values; on equal `t` the smallest id wins, as in the
+/// single-ray query).
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn closest_flat(blas: &Blas, p: &Packet8) -> Closest8 {
-    match p.uniform {
-        Some(k) => closest_flat_k::<true>(blas, p, k),
-        None => closest_flat_k::<false>(blas, p, [0, 1, 2]),
+pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+    let r = setup(rays, active as u32, &blas.bounds);
+    if r.active == 0 {
+        return Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
+    }
+    match r.uniform {
+        Some(k) => closest_flat_k::<true>(blas, &r, k),
+        None => closest_flat_k::<false>(blas, &r, [0, 1, 2]),
     }
 }
 
 #[target_feature(enable = "avx2,fma")]
-unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usize; 3]) -> Closest8 {
-    let r = Regs::new(p);
+#[inline]
+unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3]) -> Closest8 {
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
-    // SAFETY (loads and stores): `F8`/`I8` are 32-byte aligned.
-    let mut bt = _mm256_load_ps(p.t_max.0.as_ptr());
+    let mut bt = r.t_max;
     let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
     let mut bid = _mm256_set1_epi32(NO_HIT);
     for (j, tri) in blas.packets.iter().enumerate() {
@@ -235,14 +304,15 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usiz
             if id == u32::MAX {
                 continue;
             }
-            let (edge, reject, t, u, v) = test_tri::<UNIFORM>(tri, l, &r, k);
+            let (edge, reject, t, u, v) = test_tri::<UNIFORM>(tri, l, r, k);
+            // SAFETY (loads and stores): `F8`/`I8` are 32-byte aligned.
             if _mm256_movemask_ps(edge) != 0 {
                 // Rare: some lane lies exactly on an edge; the scalar test for all lanes.
                 _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
                 _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
                 _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
                 _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
-                closest_scalar(p, &mut out, &tri.lane(l), id as i32);
+                closest_scalar(r.rays, r.active, &mut out, &tri.lane(l), id as i32);
                 bt = _mm256_load_ps(out.t.0.as_ptr());
                 bu = _mm256_load_ps(out.u.0.as_ptr());
                 bv = _mm256_load_ps(out.v.0.as_ptr());
@@ -266,6 +336,7 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usiz
             ));
         }
     }
+    // SAFETY: as above.
     _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
     _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
     _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
@@ -273,11 +344,13 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usiz
     out
 }
 
-/// One triangle against every active lane with the scalar test, updating `out`.
+/// One triangle against the lanes `active` with the scalar test, updating `out`.
 #[inline(never)]
-fn closest_scalar(p: &Packet8, out: &mut Closest8, tri: &crate::triangle::Tri, id: i32) {
-    for i in (0..LANES).filter(|i| p.active & (1 << i) != 0) {
-        if let Some((t, u, v)) = intersect_watertight(&p.wr[i], tri, p.t_min.0[i], out.t.0[i]) {
+fn closest_scalar(rays: &RayPacket, active: u32, out: &mut Closest8, tri: &Tri, id: i32) {
+    for i in (0..LANES).filter(|i| active & (1 << i) != 0) {
+        let ray = rays.lane(i);
+        let wr = WatertightRay::new(ray.origin, ray.dir);
+        if let Some((t, u, v)) = intersect_watertight(&wr, tri, ray.t_min, out.t.0[i]) {
             if t < out.t.0[i] || id < out.id.0[i] {
                 (out.t.0[i], out.u.0[i], out.v.0[i], out.id.0[i]) = (t, u, v, id);
             }
@@ -285,25 +358,27 @@ fn closest_scalar(p: &Packet8, out: &mut Closest8, tri: &crate::triangle::Tri, i
     }
 }
 
-/// Lanes of the packet that hit any triangle of the flat `blas` with `t` in
+/// Lanes of `rays` set in `active` that hit any triangle of the flat `blas` with `t` in
 /// `[t_min, t_max]` (bit `i` for lane `i`).
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn occluded_flat(blas: &Blas, p: &Packet8) -> u32 {
-    match p.uniform {
-        Some(k) => occluded_flat_k::<true>(blas, p, k),
-        None => occluded_flat_k::<false>(blas, p, [0, 1, 2]),
+pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+    let r = setup(rays, active as u32, &blas.bounds);
+    if r.active == 0 {
+        return 0;
     }
+    (match r.uniform {
+        Some(k) => occluded_flat_k::<true>(blas, r, k),
+        None => occluded_flat_k::<false>(blas, r, [0, 1, 2]),
+    }) as u8
 }
 
 #[target_feature(enable = "avx2,fma")]
-unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usize; 3]) -> u32 {
-    let mut r = Regs::new(p);
-    // SAFETY: `F8` is 32-byte aligned.
-    let t_max = _mm256_load_ps(p.t_max.0.as_ptr());
-    let mut left = p.active;
+#[inline]
+unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, mut r: Regs<'_>, k: [usize; 3]) -> u32 {
+    let mut left = r.active;
     let mut occluded = 0u32;
     for (j, tri) in blas.packets.iter().enumerate() {
         for l in 0..4 {
@@ -312,11 +387,11 @@ unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usi
             }
             let (edge, reject, t, _, _) = test_tri::<UNIFORM>(tri, l, &r, k);
             let hit = if _mm256_movemask_ps(edge) != 0 {
-                any_scalar(p, left, &tri.lane(l))
+                any_scalar(r.rays, left, &tri.lane(l))
             } else {
                 let in_range = _mm256_and_ps(
                     _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max),
                 );
                 _mm256_movemask_ps(_mm256_and_ps(_mm256_andnot_ps(reject, in_range), r.act)) as u32
             };
@@ -326,9 +401,7 @@ unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usi
                 if left == 0 {
                     return occluded;
                 }
-                let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-                let m = _mm256_and_si256(_mm256_set1_epi32(left as i32), bits);
-                r.act = _mm256_castsi256_ps(_mm256_cmpeq_epi32(m, bits));
+                r.act = lane_mask(left);
             }
         }
     }
@@ -337,9 +410,14 @@ unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, p: &Packet8, k: [usi
 
 /// Lanes of `lanes` that hit `tri` (scalar test).
 #[inline(never)]
-fn any_scalar(p: &Packet8, lanes: u32, tri: &crate::triangle::Tri) -> u32 {
-    (0..LANES)
-        .filter(|&i| lanes & (1 << i) != 0)
-        .filter(|&i| intersect_watertight(&p.wr[i], tri, p.t_min.0[i], p.t_max.0[i]).is_some())
-        .fold(0, |m, i| m | (1 << i))
+fn any_scalar(rays: &RayPacket, lanes: u32, tri: &Tri) -> u32 {
+    let mut hit = 0;
+    for i in (0..LANES).filter(|&i| lanes & (1 << i) != 0) {
+        let ray = rays.lane(i);
+        let wr = WatertightRay::new(ray.origin, ray.dir);
+        if intersect_watertight(&wr, tri, ray.t_min, ray.t_max).is_some() {
+            hit |= 1 << i;
+        }
+    }
+    hit
 }

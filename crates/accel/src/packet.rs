@@ -11,6 +11,7 @@
 use crate::{avx2_packet, Simd};
 use crate::{object_ray, Blas, Hit, SceneAccel, MERGED};
 use filtrace_core::{Ray, Vec3};
+use std::borrow::Cow;
 
 /// Number of rays in a packet.
 pub const LANES: usize = 8;
@@ -104,10 +105,6 @@ impl SceneAccel {
     /// Closest hits of the lanes whose bit is set in `active`; bit i of the result's `mask`
     /// is set iff lane i is active and hit; per lane identical to `intersect`.
     pub fn intersect_packet(&self, rays: &RayPacket, active: u8) -> HitPacket {
-        let active = active & valid_lanes(rays);
-        if active == 0 {
-            return HitPacket::default();
-        }
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 {
             if let Some((object, rays, active)) = self.flat_object(rays, active) {
@@ -115,25 +112,25 @@ impl SceneAccel {
                 return unsafe { self.intersect_packet_flat_avx2(object, &rays, active) };
             }
         }
+        let active = active & valid_lanes(rays);
+        if active == 0 {
+            return HitPacket::default();
+        }
         self.intersect_packet_lanes(rays, active)
     }
 
     /// Bit i set iff lane i is active and occluded; per lane identical to `occluded`.
     pub fn occluded_packet(&self, rays: &RayPacket, active: u8) -> u8 {
-        let active = active & valid_lanes(rays);
-        if active == 0 {
-            return 0;
-        }
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 {
             if let Some((object, rays, active)) = self.flat_object(rays, active) {
-                let blas = self.object_blas(object);
                 // SAFETY: as in `intersect_packet`.
-                return unsafe {
-                    let p = avx2_packet::Packet8::new(&rays, active, blas);
-                    avx2_packet::occluded_flat(blas, &p) as u8
-                };
+                return unsafe { avx2_packet::occluded_flat(self.object_blas(object), &rays, active) };
             }
+        }
+        let active = active & valid_lanes(rays);
+        if active == 0 {
+            return 0;
         }
         self.occluded_packet_lanes(rays, active)
     }
@@ -157,20 +154,19 @@ impl SceneAccel {
     }
 
     /// When the scene is a single object with a flat bottom level (the Cornell box): that
-    /// object, the rays in its object space, and the lanes whose rays could be moved there
-    /// (`object_ray` fails for the same lanes as in the single-ray query).
-    fn flat_object(&self, rays: &RayPacket, active: u8) -> Option<(u32, RayPacket, u8)> {
+    /// object, the rays in its object space, and the lanes to trace there (the kernels
+    /// drop invalid rays; for a transformed instance, lanes whose rays are invalid or
+    /// cannot be moved into object space are dropped here, as in the single-ray query).
+    fn flat_object<'a>(&self, rays: &'a RayPacket, active: u8) -> Option<(u32, Cow<'a, RayPacket>, u8)> {
         let object = self.single?;
         if !self.object_blas(object).flat {
             return None;
         }
-        if object == MERGED {
-            return Some((object, *rays, active));
+        if object == MERGED || self.instances[object as usize].identity {
+            return Some((object, Cow::Borrowed(rays), active));
         }
         let rec = &self.instances[object as usize];
-        if rec.identity {
-            return Some((object, *rays, active));
-        }
+        let active = active & valid_lanes(rays);
         let mut local = *rays;
         let mut ok = 0u8;
         for i in (0..LANES).filter(|i| active & (1 << i) != 0) {
@@ -180,7 +176,7 @@ impl SceneAccel {
                 ok |= 1 << i;
             }
         }
-        Some((object, local, ok))
+        Some((object, Cow::Owned(local), ok))
     }
 
     fn object_blas(&self, object: u32) -> &Blas {
@@ -197,14 +193,9 @@ impl SceneAccel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn intersect_packet_flat_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> HitPacket {
-        let blas = self.object_blas(object);
-        let p = avx2_packet::Packet8::new(rays, active, blas);
         let mut out = HitPacket::default();
-        if p.active() == 0 {
-            return out;
-        }
         // SAFETY: this function runs with AVX2 and FMA.
-        let c = unsafe { avx2_packet::closest_flat(blas, &p) };
+        let c = unsafe { avx2_packet::closest_flat(self.object_blas(object), rays, active) };
         for i in 0..LANES {
             let id = c.id.0[i];
             if id == avx2_packet::NO_HIT {

@@ -37,15 +37,11 @@ fn main() {
     );
     if has("lanes") {
         let s = renderer.lane_stats(0, spp);
-        let per_vertex: Vec<String> =
-            s.alive[..8].iter().map(|&a| format!("{:.3}", a as f64 / s.samples as f64)).collect();
+        let per_vertex: Vec<String> = (0..8).map(|v| format!("{:.3}", s.utilisation(v))).collect();
         println!(
-            "lanes: {} samples, {} steps, {} busy lane-steps, paths alive at vertex 0..8 per sample [{}], {:.2} vertices per sample, mean lane utilisation {:.3}",
-            s.samples,
-            s.steps,
-            s.busy,
+            "lanes: {} groups, alive per vertex (fraction of 8 lanes) [{}], mean utilisation over bounces run {:.3}",
+            s.groups,
             per_vertex.join(" "),
-            s.vertices_per_sample(),
             s.mean_utilisation()
         );
     }

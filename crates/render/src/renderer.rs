@@ -390,8 +390,7 @@ impl Renderer {
         self.lockstep_tile(y0, pixels, first, end, stats)
     }
 
-    /// Groups of [`LANES`] adjacent pixels of each row, all their samples at once (a lane
-    /// runs its pixel's samples one after another; see [`lockstep::trace_pixels`]); each
+    /// Groups of [`LANES`] adjacent pixels of each row, one sample index at a time; each
     /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
     /// the same bit for bit.
     #[inline(always)]
@@ -421,7 +420,15 @@ impl Renderer {
                     std::array::from_fn(|i| Sampler::pixel_key(x[i], y, self.settings.seed));
                 let mut acc: [FilmPixel; LANES] =
                     std::array::from_fn(|i| group.get(i).copied().unwrap_or_default());
-                lockstep::trace_pixels(&lc, &x, y, &key, first, end, lanes, &mut acc, stats);
+                for index in first..end {
+                    let s = lockstep::trace_group(&lc, &x, y, &key, index, lanes, stats);
+                    for i in 0..n {
+                        if let Some(surface) = s[i].surface {
+                            acc[i].surface = surface;
+                        }
+                        acc[i].add(&s[i].radiance.to_pixel_sample());
+                    }
+                }
                 group.copy_from_slice(&acc[..n]);
             }
         }

@@ -287,18 +287,16 @@ fn u8x(f: impl Fn(usize) -> u32) -> [u32; LANES] {
 }
 
 /// [`filtrace_core::sampler::Sampler`] for eight sample keys at once: lane `i` is the
-/// sampler of pixel key `key[i]` (a [`Sampler::pixel_key`]) and sample index `index[i]`.
-/// `next_2d(slot)` equals `Sampler::set_slot(slot[i]); Sampler::next_2d()` of each lane,
-/// bit for bit (the same integer hashes, lane-wise: `vpmulld`, shifts and xors, and
-/// `reverse_bits` as `vpshufb` nibble tables; the byte tables of Sobol dimension 1 are
-/// read per lane).
+/// sampler of pixel key `key[i]` (a [`Sampler::pixel_key`]) and the common sample index.
+/// `next_2d(slot)` equals `Sampler::set_slot(slot); Sampler::next_2d()` of each lane, bit
+/// for bit (same integer hashes, lane-wise: `vpmulld`, shifts and xors; the byte tables of
+/// Sobol dimension 1 become gathers).
 ///
 /// [`Sampler::pixel_key`]: filtrace_core::sampler::Sampler::pixel_key
 #[derive(Clone, Copy, Debug)]
 pub struct Sampler8 {
     pub key: [u32; LANES],
-    /// `index.reverse_bits()` per lane.
-    index_rev: [u32; LANES],
+    index_rev: u32,
 }
 
 /// 0.32 fixed point to `[0, 1)` (as `filtrace_core::sampler::to_unit_float`).
@@ -309,27 +307,21 @@ fn unit8(x: [u32; LANES]) -> F8 {
 
 impl Sampler8 {
     #[inline(always)]
-    pub fn new(key: [u32; LANES], index: [u32; LANES]) -> Self {
-        Sampler8 { key, index_rev: index.map(u32::reverse_bits) }
-    }
-
-    /// Moves lane `i` to sample `index`.
-    #[inline(always)]
-    pub fn set_index(&mut self, i: usize, index: u32) {
-        self.index_rev[i] = index.reverse_bits();
+    pub fn new(key: [u32; LANES], index: u32) -> Self {
+        Sampler8 { key, index_rev: index.reverse_bits() }
     }
 
     /// Per-lane seed of `slot` and the reversed shuffled index.
     #[inline(always)]
-    fn seed_and_index(&self, slot: [u32; LANES]) -> ([u32; LANES], [u32; LANES]) {
-        let seed = u8x(|i| hash_u32(hash_combine(self.key[i], slot[i])));
-        let i_rev = u8x(|i| laine_karras_permutation(self.index_rev[i], seed[i]));
+    fn seed_and_index(&self, slot: u32) -> ([u32; LANES], [u32; LANES]) {
+        let seed = u8x(|i| hash_u32(hash_combine(self.key[i], slot)));
+        let i_rev = u8x(|i| laine_karras_permutation(self.index_rev, seed[i]));
         (seed, i_rev)
     }
 
-    /// The 2D sample of dimension slot `slot[i]` of every lane.
+    /// The 2D sample of dimension slot `slot` of every lane.
     #[inline(always)]
-    pub fn next_2d(&self, slot: [u32; LANES]) -> (F8, F8) {
+    pub fn next_2d(&self, slot: u32) -> (F8, F8) {
         let (seed, i_rev) = self.seed_and_index(slot);
         let x = u8x(|i| {
             laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
@@ -339,9 +331,9 @@ impl Sampler8 {
         (unit8(x), unit8(y))
     }
 
-    /// The 1D sample of dimension slot `slot[i]` of every lane (the `x` of `next_2d`).
+    /// The 1D sample of dimension slot `slot` of every lane (the `x` of `next_2d`).
     #[inline(always)]
-    pub fn next_1d(&self, slot: [u32; LANES]) -> F8 {
+    pub fn next_1d(&self, slot: u32) -> F8 {
         let (seed, i_rev) = self.seed_and_index(slot);
         unit8(u8x(|i| {
             laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
@@ -358,19 +350,16 @@ mod tests {
     fn sampler8_matches_the_scalar_sampler() {
         let keys: [u32; LANES] = std::array::from_fn(|i| Sampler::pixel_key(i as u32 * 7, 3, 11));
         for index in [0u32, 1, 2, 5, 255, 1 << 20, u32::MAX] {
-            // Different indices and slots per lane.
-            let idx: [u32; LANES] = std::array::from_fn(|i| index.wrapping_add(i as u32 % 3));
-            let s8 = Sampler8::new(keys, idx);
+            let s8 = Sampler8::new(keys, index);
             for slot in [0u32, 1, 4, 33] {
-                let slots: [u32; LANES] = std::array::from_fn(|i| slot + i as u32 % 2);
-                let (x, y) = s8.next_2d(slots);
-                let one = s8.next_1d(slots);
+                let (x, y) = s8.next_2d(slot);
+                let one = s8.next_1d(slot);
                 for (i, &key) in keys.iter().enumerate() {
-                    let mut s = Sampler::from_pixel_key(key, idx[i]);
-                    s.set_slot(slots[i]);
+                    let mut s = Sampler::from_pixel_key(key, index);
+                    s.set_slot(slot);
                     let u = s.next_2d();
                     assert_eq!((x.0[i].to_bits(), y.0[i].to_bits()), (u.x.to_bits(), u.y.to_bits()));
-                    s.set_slot(slots[i]);
+                    s.set_slot(slot);
                     assert_eq!(one.0[i].to_bits(), s.next_1d().to_bits());
                 }
             }

@@ -31,11 +31,12 @@
 use super::lanes::{and, bits, from_bits, not, select, Sampler8, F8, LANES, M8, V8};
 use super::path::visible_surface;
 use super::{
-    vertex_slot, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT, SLOT_PIXEL, SLOT_RR,
+    vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
+    SLOT_PIXEL, SLOT_RR,
 };
 use crate::bsdf::{Diffuse, SurfaceBsdf};
 use crate::camera::PinholeCamera;
-use crate::film::{FilmPixel, VisibleSurface};
+use crate::film::VisibleSurface;
 use crate::surface::{gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION};
 use filtrace_accel::{Hit, HitPacket, RayPacket};
 use filtrace_core::sampling::power_heuristic;
@@ -45,19 +46,17 @@ use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
 /// Longest path (in vertices) [`LaneStats`] tells apart; longer ones count as the last.
 pub const STATS_VERTICES: usize = 16;
 
-/// Lane utilisation of the lockstep integrator, summed over the groups of 8 pixels traced.
+/// Lane utilisation of the lockstep integrator: how many lanes are alive at each path
+/// vertex, summed over the groups traced.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LaneStats {
-    /// Groups of eight lanes traced (8 adjacent pixels of a row, all their samples).
+    /// Groups of eight lanes traced (one per 8 pixels and sample index).
     pub groups: u64,
-    /// Paths started (samples).
-    pub samples: u64,
-    /// Steps of the lane loop (one closest-hit packet and one bounce stage each).
-    pub steps: u64,
-    /// Lanes with a ray in the step's closest-hit packet, summed over steps.
-    pub busy: u64,
-    /// `alive[v]`: lanes running the bounce stage at path vertex `v` (first hit = 0),
-    /// summed over steps.
+    /// Lanes holding a pixel (fewer than 8 only at the right edge of the image).
+    pub camera_lanes: u64,
+    /// Bounces run, summed over groups (a group runs bounce `v` while any lane is alive).
+    pub bounces: u64,
+    /// `alive[v]`: lanes with a path vertex `v` (first hit = 0) at the start of bounce `v`.
     pub alive: [u64; STATS_VERTICES],
 }
 
@@ -65,22 +64,22 @@ impl LaneStats {
     /// Adds `other`'s counts.
     pub fn merge(&mut self, other: &LaneStats) {
         self.groups += other.groups;
-        self.samples += other.samples;
-        self.steps += other.steps;
-        self.busy += other.busy;
+        self.camera_lanes += other.camera_lanes;
+        self.bounces += other.bounces;
         for (a, b) in self.alive.iter_mut().zip(other.alive.iter()) {
             *a += b;
         }
     }
 
-    /// Lane slots with a ray to trace over lane slots paid for (8 per step).
-    pub fn mean_utilisation(&self) -> f64 {
-        self.busy as f64 / (self.steps.max(1) * LANES as u64) as f64
+    /// Fraction of all lane slots (8 per group) alive at vertex `v`.
+    pub fn utilisation(&self, v: usize) -> f64 {
+        self.alive[v.min(STATS_VERTICES - 1)] as f64 / (self.groups.max(1) * LANES as u64) as f64
     }
 
-    /// Mean path vertices per sample (bounce stages run per path).
-    pub fn vertices_per_sample(&self) -> f64 {
-        self.alive.iter().sum::<u64>() as f64 / self.samples.max(1) as f64
+    /// Lane slots used over lane slots paid for: alive lanes summed over vertices, divided
+    /// by 8 x the bounces the groups ran.
+    pub fn mean_utilisation(&self) -> f64 {
+        self.alive.iter().sum::<u64>() as f64 / (self.bounces.max(1) * LANES as u64) as f64
     }
 }
 
@@ -334,188 +333,104 @@ impl LockstepContext<'_> {
     }
 }
 
-/// What lane `i` is doing.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-enum Lane {
-    /// Free: starts the pixel's next sample, or stays idle when it has none left.
-    #[default]
-    Free,
-    /// A path whose next ray (camera or bounce) is in the packet.
-    Tracing,
-}
-
-/// Traces samples `[first, end)` of the pixels `(x[i], y)` of the lanes set in `lanes`
-/// and adds them, in index order, to `acc[i]`; `key[i]` is the pixel's
-/// [`filtrace_core::sampler::Sampler::pixel_key`]. Each sample equals
-/// `Renderer::trace_sample(x[i], y, index)` bit for bit (visible surface at sample 0), so
-/// `acc` ends as the scalar tile loop leaves it.
-///
-/// Lanes are refilled: a lane whose path ends starts its pixel's next sample in the next
-/// step, so lanes run at different path vertices (the vertex, the sampler slots and the
-/// depth and roulette decisions are per lane) and stay busy until their pixel has no
-/// sample left. Each lane's samples are sequential, so each pixel still adds its samples
-/// in index order.
+/// Traces sample `index` of the pixels `(x[i], y)` for the lanes set in `lanes`; `key[i]`
+/// is the pixel's [`filtrace_core::sampler::Sampler::pixel_key`]. Lane `i`'s result equals
+/// `Renderer::trace_sample(x[i], y, index)` bit for bit (visible surface at sample 0).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-pub fn trace_pixels(
+pub fn trace_group(
     lc: &LockstepContext,
     x: &[u32; LANES],
     y: u32,
     key: &[u32; LANES],
-    first: u32,
-    end: u32,
+    index: u32,
     lanes: M8,
-    acc: &mut [FilmPixel; LANES],
     stats: &mut LaneStats,
-) {
+) -> [CameraSample; LANES] {
     let ctx = &lc.ctx;
     let params = &lc.params;
     let cam = lc.camera;
-    let zero = F8::splat(0.0);
-    let materials = &ctx.scene.materials;
-    let default_bsdf = SurfaceBsdf::Diffuse(Diffuse::new(Rgb::ZERO));
+    let sampler = Sampler8::new(*key, index);
+    let mut out = [CameraSample::default(); LANES];
     stats.groups += 1;
+    stats.camera_lanes += lanes.iter().filter(|&&l| l).count() as u64;
 
-    // Per-lane state: the sample and its path (`trace_from_hit`'s variables).
-    let mut state = [Lane::Free; LANES];
-    let mut next_index = [first; LANES];
-    let mut index = [0u32; LANES];
-    let mut sampler = Sampler8::new(*key, [first; LANES]);
-    let mut vertex = [0u32; LANES];
+    // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
+    let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
+    let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
+    let px = F8(x.map(|v| v as f32));
+    let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
+    let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
+    let dir =
+        (V8::splat(cam.forward) + V8::splat(cam.right_half) * sx + V8::splat(cam.up_half) * sy).normalize();
+    let mut rays = RayPacket {
+        origin: [[cam.eye.x; LANES], [cam.eye.y; LANES], [cam.eye.z; LANES]],
+        dir: [dir.x.0, dir.y.0, dir.z.0],
+        t_min: [0.0; LANES],
+        t_max: [f32::INFINITY; LANES],
+    };
+    let hits = lc.intersect(&rays, lanes);
+    let (mut si, hit) = from_hits(ctx, &dir, &hits);
+    let want_surface = index == 0;
+    for i in lanes_of(lanes) {
+        if hit[i] {
+            if want_surface {
+                out[i].surface = Some(visible_surface(ctx, &si.lane(i)));
+            }
+        } else {
+            out[i].radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
+            out[i].surface = want_surface.then(VisibleSurface::default);
+        }
+    }
+
+    // The paths from the first hits (`trace_from_hit`).
+    let mut act = hit;
+    let zero = F8::splat(0.0);
     let mut beta = V8::splat(Rgb::ONE);
     let mut l_direct = V8::default();
     let mut l_indirect = V8::default();
     let mut p_b = zero;
     let mut specular = [false; LANES];
     let mut prev_p = V8::default();
-    let mut surface: [Option<VisibleSurface>; LANES] = [None; LANES];
-    let mut org = V8::default();
-    let mut dir = V8::default();
-
-    // Adds lane `i`'s finished sample to its pixel.
-    let finish = |acc: &mut [FilmPixel; LANES], i: usize, split: Split, surface: Option<VisibleSurface>| {
-        if let Some(s) = surface {
-            acc[i].surface = s;
-        }
-        acc[i].add(&split.to_pixel_sample());
-    };
+    let mut vertex = 0u32;
+    let materials = &ctx.scene.materials;
+    let default_bsdf = SurfaceBsdf::Diffuse(Diffuse::new(Rgb::ZERO));
 
     loop {
-        // Free lanes start their pixel's next sample: a camera ray
-        // (`PinholeCamera::sample_ray`, sample 0 through the pixel centre).
-        let fresh: M8 = std::array::from_fn(|i| lanes[i] & (state[i] == Lane::Free) & (next_index[i] < end));
-        if fresh.iter().any(|&f| f) {
-            for i in lanes_of(fresh) {
-                index[i] = next_index[i];
-                next_index[i] += 1;
-                sampler.set_index(i, index[i]);
-                state[i] = Lane::Tracing;
-                stats.samples += 1;
-            }
-            let (jx, jy) = sampler.next_2d([SLOT_PIXEL; LANES]);
-            let centre: M8 = index.map(|k| k == 0);
-            let (ox, oy) = (select(centre, F8::splat(0.5), jx), select(centre, F8::splat(0.5), jy));
-            let px = F8(x.map(|v| v as f32));
-            let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
-            let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
-            let cam_dir =
-                (V8::splat(cam.forward) + V8::splat(cam.right_half) * sx + V8::splat(cam.up_half) * sy)
-                    .normalize();
-            dir = V8::select(fresh, cam_dir, dir);
-            org = V8::select(fresh, V8::splat(cam.eye), org);
-        }
-        let tracing: M8 = std::array::from_fn(|i| state[i] == Lane::Tracing);
-        if !tracing.iter().any(|&t| t) {
-            break;
-        }
-        stats.steps += 1;
-        stats.busy += tracing.iter().filter(|&&t| t).count() as u64;
+        stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.iter().filter(|&&a| a).count() as u64;
+        stats.bounces += 1;
 
-        // Closest hits of camera and bounce rays together.
-        let rays = RayPacket {
-            origin: [org.x.0, org.y.0, org.z.0],
-            dir: [dir.x.0, dir.y.0, dir.z.0],
-            t_min: [0.0; LANES],
-            t_max: [f32::INFINITY; LANES],
-        };
-        let hits = lc.intersect(&rays, tracing);
-        let (si, found) = from_hits(ctx, &dir, &hits);
-        for i in lanes_of(tracing) {
-            if fresh[i] {
-                // A camera ray: a miss is the environment, a hit starts the path.
-                let want_surface = index[i] == 0;
-                if !found[i] {
-                    let split =
-                        Split { direct: ctx.lights.environment_radiance(dir.lane(i)), indirect: Rgb::ZERO };
-                    finish(acc, i, split, want_surface.then(VisibleSurface::default));
-                    state[i] = Lane::Free;
-                    continue;
-                }
-                surface[i] = if want_surface { Some(visible_surface(ctx, &si.lane(i))) } else { None };
-                vertex[i] = 0;
-                beta.set_lane(i, Rgb::ONE);
-                l_direct.set_lane(i, Rgb::ZERO);
-                l_indirect.set_lane(i, Rgb::ZERO);
-                p_b.0[i] = 0.0;
-                specular[i] = false;
-                prev_p.set_lane(i, Vec3::ZERO);
-            } else if !found[i] {
-                // A bounce ray left the scene: the environment, MIS-weighted.
-                let w = dir.lane(i);
-                let le = ctx.lights.environment_radiance(w);
-                if le != Rgb::ZERO {
-                    let w_b = if specular[i] {
-                        1.0
-                    } else {
-                        power_heuristic(1.0, p_b.0[i], 1.0, ctx.lights.pdf_environment(w))
-                    };
-                    let l = beta.lane(i) * w_b * le;
-                    if vertex[i] <= 1 {
-                        l_direct.set_lane(i, l_direct.lane(i) + l);
-                    } else {
-                        l_indirect.set_lane(i, l_indirect.lane(i) + l);
-                    }
-                }
-                let split = Split { direct: l_direct.lane(i), indirect: l_indirect.lane(i) };
-                finish(acc, i, split, surface[i]);
-                state[i] = Lane::Free;
-            }
-        }
-        let mut act = and(tracing, found);
-        for i in lanes_of(act) {
-            stats.alive[(vertex[i] as usize).min(STATS_VERTICES - 1)] += 1;
-        }
-
-        // Emitted radiance at the vertex (per lane: few lanes hit an emitter), then the
-        // lanes at the depth limit end.
+        // Emitted radiance at the vertex (per lane: few lanes hit an emitter).
         for i in lanes_of(act) {
             let m = &materials[si.material[i] as usize];
-            if m.is_emissive() && (si.front_face[i] || m.two_sided_emission) {
-                let le = m.emission;
-                if le != Rgb::ZERO {
-                    let w_b = if vertex[i] == 0 || specular[i] {
-                        1.0
-                    } else {
-                        let p_l = ctx.lights.pdf_area(
-                            si.instance[i],
-                            si.prim[i],
-                            prev_p.lane(i),
-                            si.p.lane(i),
-                            si.n_winding.lane(i),
-                        );
-                        power_heuristic(1.0, p_b.0[i], 1.0, p_l)
-                    };
-                    let l = beta.lane(i) * w_b * le;
-                    if vertex[i] <= 1 {
-                        l_direct.set_lane(i, l_direct.lane(i) + l);
-                    } else {
-                        l_indirect.set_lane(i, l_indirect.lane(i) + l);
-                    }
+            if !(m.is_emissive() && (si.front_face[i] || m.two_sided_emission)) {
+                continue;
+            }
+            let le = m.emission;
+            if le != Rgb::ZERO {
+                let w_b = if vertex == 0 || specular[i] {
+                    1.0
+                } else {
+                    let p_l = ctx.lights.pdf_area(
+                        si.instance[i],
+                        si.prim[i],
+                        prev_p.lane(i),
+                        si.p.lane(i),
+                        si.n_winding.lane(i),
+                    );
+                    power_heuristic(1.0, p_b.0[i], 1.0, p_l)
+                };
+                let l = beta.lane(i) * w_b * le;
+                if vertex <= 1 {
+                    l_direct.set_lane(i, l_direct.lane(i) + l);
+                } else {
+                    l_indirect.set_lane(i, l_indirect.lane(i) + l);
                 }
             }
-            if !params.allows(vertex[i] + 2) {
-                act[i] = false;
-            }
+        }
+
+        // Stop when one more segment would exceed max_depth.
+        if !params.allows(vertex + 2) {
+            break;
         }
 
         // The BSDFs, the shading frames and wo in them.
@@ -538,15 +453,15 @@ pub fn trace_pixels(
         let n = si.n_s;
         let wo = to_local(&fx, &fy, &n, si.wo);
 
-        // The vertex's random numbers (`VertexSamples::draw`), per-lane slots.
-        let base = vertex.map(vertex_slot);
-        let (ulx, uly) = sampler.next_2d(base.map(|b| b + SLOT_LIGHT));
-        let (ubx, uby) = sampler.next_2d(base.map(|b| b + SLOT_BSDF));
+        // The vertex's random numbers (`VertexSamples::draw`).
+        let base = vertex_slot(vertex);
+        let (ulx, uly) = sampler.next_2d(base + SLOT_LIGHT);
+        let (ubx, uby) = sampler.next_2d(base + SLOT_BSDF);
         let (u_select, u_lobe) = if lobe.iter().any(|&l| l) {
-            let (cx, cy) = sampler.next_2d(base.map(|b| b + SLOT_CHOICES));
+            let (cx, cy) = sampler.next_2d(base + SLOT_CHOICES);
             (cx, select(lobe, cy, zero))
         } else {
-            (sampler.next_1d(base.map(|b| b + SLOT_CHOICES)), zero)
+            (sampler.next_1d(base + SLOT_CHOICES), zero)
         };
 
         // Next-event estimation (`sample_one_light`): light choice per lane, area lights
@@ -652,9 +567,11 @@ pub fn trace_pixels(
         let contrib = V8::select(lit, f * ls_li * (w_l / p_l), V8::default());
         // The light reaches the eye over vertices 0..=vertex: component of vertex + 1.
         let add = beta * contrib;
-        let first_vertex: M8 = vertex.map(|v| v == 0);
-        l_direct = V8::select(and(act, first_vertex), l_direct + add, l_direct);
-        l_indirect = V8::select(and(act, not(first_vertex)), l_indirect + add, l_indirect);
+        if vertex < 1 {
+            l_direct = V8::select(act, l_direct + add, l_direct);
+        } else {
+            l_indirect = V8::select(act, l_indirect + add, l_indirect);
+        }
 
         // BSDF sampling for the next direction (cosine hemisphere in lanes for Lambert).
         let mut bs_wi = sample_cosine_hemisphere8(ubx, uby);
@@ -684,29 +601,55 @@ pub fn trace_pixels(
         }
         prev_p = V8::select(cont, si.p, prev_p);
         cont = and(cont, and(not(beta.is_zero()), beta.is_finite()));
-        let next_org = si.offset_origin(wi);
+        let org = si.offset_origin(wi);
 
         // Russian roulette once the path has rr_depth segments.
-        let rr: M8 = std::array::from_fn(|i| cont[i] & (vertex[i] + 2 >= params.rr_depth));
-        if rr.iter().any(|&r| r) {
+        if vertex + 2 >= params.rr_depth {
             let q = beta.max_element().min(F8::splat(0.95));
-            let u_rr = sampler.next_1d(vertex.map(|v| vertex_slot(v) + SLOT_RR));
-            let killed = and(rr, u_rr.ge(q));
-            cont = and(cont, not(killed));
-            beta = V8::select(and(rr, cont), beta / q, beta);
+            let u_rr = sampler.next_1d(vertex_slot(vertex) + SLOT_RR);
+            cont = and(cont, not(u_rr.ge(q)));
+            beta = V8::select(cont, beta / q, beta);
+        }
+        vertex += 1;
+        act = cont;
+        if !act.iter().any(|&a| a) {
+            break;
         }
 
-        // Paths that end add their sample; the others trace their next segment.
-        for i in lanes_of(tracing) {
-            if cont[i] {
-                vertex[i] += 1;
-            } else if found[i] {
-                let split = Split { direct: l_direct.lane(i), indirect: l_indirect.lane(i) };
-                finish(acc, i, split, surface[i]);
-                state[i] = Lane::Free;
+        // Find the next vertex; a miss adds the environment, MIS-weighted.
+        rays.origin = [org.x.0, org.y.0, org.z.0];
+        rays.dir = [wi.x.0, wi.y.0, wi.z.0];
+        let hits = lc.intersect(&rays, act);
+        let (next, found) = from_hits(ctx, &wi, &hits);
+        let missed = and(act, not(found));
+        if ctx.lights.has_environment() {
+            for i in lanes_of(missed) {
+                let w = wi.lane(i);
+                let le = ctx.lights.environment_radiance(w);
+                if le != Rgb::ZERO {
+                    let w_b = if specular[i] {
+                        1.0
+                    } else {
+                        power_heuristic(1.0, p_b.0[i], 1.0, ctx.lights.pdf_environment(w))
+                    };
+                    let l = beta.lane(i) * w_b * le;
+                    if vertex <= 1 {
+                        l_direct.set_lane(i, l_direct.lane(i) + l);
+                    } else {
+                        l_indirect.set_lane(i, l_indirect.lane(i) + l);
+                    }
+                }
             }
         }
-        org = V8::select(cont, next_org, org);
-        dir = V8::select(cont, wi, dir);
+        act = and(act, found);
+        si = next;
+        if !act.iter().any(|&a| a) {
+            break;
+        }
     }
+
+    for i in lanes_of(hit) {
+        out[i].radiance = Split { direct: l_direct.lane(i), indirect: l_indirect.lane(i) };
+    }
+    out
 }

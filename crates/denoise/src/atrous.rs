@@ -150,7 +150,7 @@ pub fn atrous_into(
     let (w, h) = (color.width(), color.height());
     let stride = if (0..params.iterations).all(|i| ring_fits(w, 1 << i)) { level_stride(w) } else { w };
     // À-Trous reads depth only as the position when no position buffer is given.
-    let g = Guides::new_strided(guide, w, h, stride, false)?;
+    let g = Guides::new_strided(guide, w, h, stride)?;
     g.require_position(params.sigma_position)?;
     let (mut src, valid) = to_planes_strided(color, stride);
     let n = stride * h;

@@ -190,8 +190,6 @@ pub(crate) struct Guides {
     /// Positions divided by the scene scale, or `[depth / scale, 0, 0]` when only depth is
     /// given; `None` when neither is.
     pub position: Option<Planes3>,
-    /// Depth divided by the depth scale (about `[0, 1]`), when depth is given.
-    pub depth: Option<Buf>,
     /// 1 on surface pixels, 0 on background.
     pub surface: Buf,
 }
@@ -210,18 +208,18 @@ impl Guides {
     }
 
     pub fn new(g: &GBuffer, width: usize, height: usize) -> Result<Self, DenoiseError> {
-        Self::new_strided(g, width, height, width, true)
+        Self::new_strided(g, width, height, width)
     }
 
     /// [`Guides::new`] with planes of `stride >= width` values per row; the padding columns
-    /// are background (normal 0, surface 0, position/depth 0). Without `keep_depth` the depth
-    /// plane is made only when it stands in for an absent position.
+    /// are background (normal 0, surface 0, position 0). The depth is read only when it
+    /// stands in for an absent position (no filter here reads it otherwise: the guided
+    /// filter converts its own inputs).
     pub fn new_strided(
         g: &GBuffer,
         width: usize,
         height: usize,
         stride: usize,
-        keep_depth: bool,
     ) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
         debug_assert!(stride >= width);
@@ -260,8 +258,8 @@ impl Guides {
                 });
         }
         let surface_px = |i: usize| is_surface(&g.normal.data()[3 * i..3 * i + 3]);
-        // The depth plane is only needed by filters that use it, or as the position.
-        let depth = g.depth.as_ref().filter(|_| keep_depth || g.position.is_none()).map(|d| {
+        // The depth plane is only needed as the position.
+        let depth = g.depth.as_ref().filter(|_| g.position.is_none()).map(|d| {
             let scale = g.scene_scale.unwrap_or_else(|| {
                 let m = d
                     .data()
@@ -331,8 +329,8 @@ impl Guides {
             }
             Some(planes)
         } else {
-            depth.as_ref().map(|d| [d.clone(), Buf::zeros(n), Buf::zeros(n)])
+            depth.map(|d| [d, Buf::zeros(n), Buf::zeros(n)])
         };
-        Ok(Self { width, height, stride, normal, position, depth, surface })
+        Ok(Self { width, height, stride, normal, position, surface })
     }
 }

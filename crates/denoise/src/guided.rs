@@ -10,8 +10,9 @@
 //!
 //! with a separate `eps` per guidance channel (`U` diagonal). The coefficients of all windows
 //! covering a pixel are averaged and the output is `q_i = mean(a) . I_i + mean(b)`.
-//! Every window mean comes from `O(N)` running box sums ([`crate::boxsum`]): the cost does not
-//! depend on the radius. The `D x D` system is solved per pixel by Cholesky.
+//! Every window mean comes from `O(N)` running box sums ([`crate::stripbox`]): the cost does
+//! not depend on the radius. The `D x D` system is solved per pixel by Cholesky, 16 windows
+//! at a time (one per vector lane).
 //!
 //! Background and invalid pixels: window statistics use only surface pixels with a finite
 //! colour (a mask `m` multiplies every sum), windows holding none are skipped in the
@@ -23,10 +24,11 @@
 //! radius 24-32, eps 0.01 for normals and 0.01-0.03 for depth). Edges that the guidance does
 //! not show (shadows, texture) are smoothed away: filter demodulated illumination.
 
-use crate::boxsum::{box_sums, BoxPass};
 use crate::error::{invalid, DenoiseError};
-use crate::gbuffer::{check_color, to_planes, GBuffer, Guides, Planes3};
+use crate::gbuffer::{check_color, is_surface, GBuffer};
 use crate::pool::Buf;
+use crate::simd::Isa;
+use crate::stripbox::{strip_box_sums, vadd, vecs, vecs_mut, vmul, vsub, StripPass, Strips, S, V};
 use filtrace_core::Image;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -110,41 +112,23 @@ impl Default for GuidedParams {
     }
 }
 
-/// The guidance planes, centred (`I - 0.5`, which leaves `a` unchanged and keeps the running
-/// sums small), and the `eps` of each.
-pub(crate) fn guidance_planes(g: &Guides, p: &GuidedParams) -> Result<(Vec<Buf>, Vec<f32>), DenoiseError> {
-    let n = &g.normal;
-    let map = |src: &[f32], f: &(dyn Fn(f32) -> f32 + Sync)| {
-        let mut b = Buf::uninit(src.len());
-        b.par_iter_mut().zip(src.par_iter()).for_each(|(o, v)| *o = f(*v));
-        b
-    };
-    Ok(match p.guidance {
-        Guidance::GreyNormal => {
-            let mut grey = Buf::uninit(g.width * g.height);
-            grey.par_iter_mut().enumerate().for_each(|(i, o)| *o = (n[0][i] + n[1][i] + n[2][i]) / 6.0);
-            (vec![grey], vec![p.eps_normal])
-        }
-        Guidance::Normal => {
-            let planes = (0..3).map(|c| map(&n[c], &|v| 0.5 * v)).collect();
-            (planes, vec![p.eps_normal; 3])
-        }
-        Guidance::NormalDepth => {
-            let d = g.depth.as_ref().ok_or(DenoiseError::MissingGuide {
-                buffer: "depth",
-                needed_by: "guided filter with normal+depth guidance",
-            })?;
-            let mut planes: Vec<Buf> = (0..3).map(|c| map(&n[c], &|v| 0.5 * v)).collect();
-            planes.push(map(d, &|v| v - 0.5));
-            (planes, vec![p.eps_normal, p.eps_normal, p.eps_normal, p.eps_depth])
-        }
-    })
-}
-
 /// Filters `color` (3 channels) guided by `guide`. See the module docs.
 pub fn guided(color: &Image, guide: &GBuffer, params: &GuidedParams) -> Result<Image, DenoiseError> {
     let mut out = Image::new(color.width(), color.height(), 3);
     guided_into(color, guide, params, &mut out)?;
+    Ok(out)
+}
+
+/// [`guided`] with the instruction set chosen by the caller (tests compare the builds).
+#[cfg(test)]
+pub(crate) fn guided_with_isa(
+    color: &Image,
+    guide: &GBuffer,
+    params: &GuidedParams,
+    isa: Isa,
+) -> Result<Image, DenoiseError> {
+    let mut out = Image::new(color.width(), color.height(), 3);
+    guided_into_isa(color, guide, params, &mut out, isa)?;
     Ok(out)
 }
 
@@ -155,308 +139,394 @@ pub fn guided_into(
     params: &GuidedParams,
     out: &mut Image,
 ) -> Result<(), DenoiseError> {
+    guided_into_isa(color, guide, params, out, crate::simd::isa())
+}
+
+fn guided_into_isa(
+    color: &Image,
+    guide: &GBuffer,
+    params: &GuidedParams,
+    out: &mut Image,
+    isa: Isa,
+) -> Result<(), DenoiseError> {
     check_color(color)?;
     params.validate()?;
-    let g = Guides::new(guide, color.width(), color.height())?;
-    let (planes, eps) = guidance_planes(&g, params)?;
-    let (p, valid) = to_planes(color);
-    let mut mask = Buf::uninit(g.width * g.height);
-    mask.par_iter_mut().zip(g.surface.par_iter().zip(valid.par_iter())).for_each(|(m, (s, v))| *m = s * v);
-    if out.width() != color.width() || out.height() != color.height() || out.channels() != 3 {
-        *out = Image::new(color.width(), color.height(), 3);
+    let (w, h) = (color.width(), color.height());
+    guide.validate(w, h)?;
+    if params.guidance == Guidance::NormalDepth && guide.depth.is_none() {
+        return Err(DenoiseError::MissingGuide {
+            buffer: "depth",
+            needed_by: "guided filter with normal+depth guidance",
+        });
     }
-    let args =
-        Args { w: g.width, h: g.height, r: params.radius as usize, mask: &mask, surface: &g.surface, p: &p };
-    match planes.len() {
-        1 => guided_impl::<1, 16, 8>(&args, &[&planes[0]], [eps[0]], out),
-        3 => guided_impl::<3, 24, 16>(
-            &args,
-            &[&planes[0], &planes[1], &planes[2]],
-            [eps[0], eps[1], eps[2]],
-            out,
-        ),
-        _ => guided_impl::<4, 32, 16>(
-            &args,
-            &[&planes[0], &planes[1], &planes[2], &planes[3]],
-            [eps[0], eps[1], eps[2], eps[3]],
-            out,
-        ),
+    if out.width() != w || out.height() != h || out.channels() != 3 {
+        *out = Image::new(w, h, 3);
+    }
+    if w == 0 || h == 0 {
+        return Ok(());
+    }
+    let (en, ed) = (params.eps_normal, params.eps_depth);
+    let r = params.radius as usize;
+    match params.guidance {
+        Guidance::GreyNormal => guided_impl::<1, { k1(1) }, { k2(1) }>(color, guide, r, [en], out, isa),
+        Guidance::Normal => guided_impl::<3, { k1(3) }, { k2(3) }>(color, guide, r, [en; 3], out, isa),
+        Guidance::NormalDepth => {
+            guided_impl::<4, { k1(4) }, { k2(4) }>(color, guide, r, [en, en, en, ed], out, isa)
+        }
     }
     Ok(())
 }
 
-pub(crate) struct Args<'a> {
-    pub w: usize,
-    pub h: usize,
-    pub r: usize,
-    /// 1 where the pixel takes part in the fit (surface with a finite colour).
-    pub mask: &'a [f32],
-    pub surface: &'a [f32],
-    pub p: &'a Planes3,
-}
-
 /// Number of pass-1 quantities: `m, m I (D), m I I^T (upper, D(D+1)/2), m p (3), m I p (3D)`.
-const fn k1_used(d: usize) -> usize {
+const fn k1(d: usize) -> usize {
     1 + d + d * (d + 1) / 2 + 3 + 3 * d
 }
 
-/// `K1`, `K2`: padded quantity counts of the two box passes (pass 2 sums
-/// `[indicator, a (3D), b (3)]`).
+/// Number of pass-2 quantities (per-window coefficients): `[indicator, a (3D), b (3)]`.
+const fn k2(d: usize) -> usize {
+    4 + 3 * d
+}
+
+/// Planes of [`Inputs`] after the `D` guidance planes.
+const P_COLOR: usize = 0;
+const P_MASK: usize = 3;
+const P_SURFACE: usize = 4;
+
+/// The per-pixel inputs of both passes in the lane-strip layout of [`crate::stripbox`]: per
+/// row, `D + 5` planes of `len` vectors: the guidance `I_a` centred (`I - 0.5`, which leaves
+/// `a` unchanged and keeps the running sums small), the sanitised colour `p` (non-finite
+/// values replaced by 0), the fit mask `m` (1 on surface pixels with a finite colour) and the
+/// surface indicator `s`. Padding lanes are all 0.
+struct Inputs<const D: usize> {
+    st: Strips,
+    data: Buf,
+}
+
+impl<const D: usize> Inputs<D> {
+    const PLANES: usize = D + 5;
+
+    /// Converts the interleaved colour and guides (one pass over them, rows in parallel).
+    fn new(color: &Image, g: &GBuffer, st: Strips) -> Self {
+        let (w, len) = (st.w, st.len);
+        let row = Self::PLANES * len * S;
+        let mut data = Buf::uninit(st.h * row);
+        // Depth divided by the depth scale, as `Guides` does (scene scale, else the largest
+        // surface depth).
+        let depth = g.depth.as_ref().filter(|_| D == 4).map(|d| {
+            let scale = g.scene_scale.unwrap_or_else(|| {
+                let normals = g.normal.data().chunks_exact(3);
+                let m = d
+                    .data()
+                    .iter()
+                    .zip(normals)
+                    .filter(|(v, n)| is_surface(n) && v.is_finite())
+                    .fold(0.0f32, |m, (v, _)| m.max(v.abs()));
+                if m > 0.0 {
+                    m
+                } else {
+                    1.0
+                }
+            });
+            (d.data(), 1.0 / scale)
+        });
+        let (c, n) = (color.data(), g.normal.data());
+        let rows_per_item = (16 * 1024 / w).max(1);
+        data.par_chunks_mut(rows_per_item * row).enumerate().for_each(|(item, rows)| {
+            rows.fill(0.0);
+            for (ry, out) in rows.chunks_exact_mut(row).enumerate() {
+                let y = item * rows_per_item + ry;
+                for l in 0..st.segs {
+                    for j in 0..len.min(w.saturating_sub(l * len)) {
+                        let i = y * w + l * len + j;
+                        let px = &n[3 * i..3 * i + 3];
+                        let surface = is_surface(px);
+                        let inv = if surface {
+                            1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt()
+                        } else {
+                            0.0
+                        };
+                        let nn = if surface { [px[0] * inv, px[1] * inv, px[2] * inv] } else { [0.0; 3] };
+                        let mut put = |q: usize, v: f32| out[(q * len + j) * S + l] = v;
+                        if D == 1 {
+                            // The mean of the [0,1]-scaled normal, centred: (n0 + n1 + n2) / 6.
+                            put(0, (nn[0] + nn[1] + nn[2]) / 6.0);
+                        } else {
+                            for a in 0..3 {
+                                put(a, 0.5 * nn[a]);
+                            }
+                        }
+                        if let Some((d, inv_scale)) = depth {
+                            let v = d[i];
+                            put(3, if v.is_finite() { v * inv_scale } else { 0.0 } - 0.5);
+                        }
+                        let cp = &c[3 * i..3 * i + 3];
+                        let valid = cp.iter().all(|v| v.is_finite());
+                        for k in 0..3 {
+                            put(D + P_COLOR + k, if valid { cp[k] } else { 0.0 });
+                        }
+                        let s = if surface { 1.0 } else { 0.0 };
+                        put(D + P_MASK, if valid { s } else { 0.0 });
+                        put(D + P_SURFACE, s);
+                    }
+                }
+            }
+        });
+        Self { st, data }
+    }
+
+    /// Plane `q` at position `j` of row `y`.
+    #[inline(always)]
+    fn get(&self, q: usize, y: usize, j: usize) -> V {
+        vecs(&self.data)[(y * Self::PLANES + q) * self.st.len + j]
+    }
+}
+
+/// `K1`, `K2`: quantity counts of the two box passes (see [`k1`], [`k2`]).
 fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
-    args: &Args,
-    guide: &[&[f32]; D],
+    color: &Image,
+    g: &GBuffer,
+    r: usize,
     eps: [f32; D],
     out: &mut Image,
+    isa: Isa,
 ) {
-    assert!(k1_used(D) <= K1 && 4 + 3 * D <= K2);
-    let (w, h, r) = (args.w, args.h, args.r);
-    let kp = 1 + D + D * (D + 1) / 2; // index of m p
-    let kc = kp + 3; // index of m I p
-
-    // Pass 1: window statistics -> per-window coefficients (a_k, b_k) (eqs. 8-9).
-    let mut coef = crate::pool::take(w * h * K2);
-    let pass1 = Pass1::<D> { args, guide, eps, kp, kc };
-    box_sums::<K1, _>(w, h, r, &mut coef, K2, &pass1);
+    let (w, h) = (color.width(), color.height());
+    let st = Strips::new(w, h, r);
+    let inputs = Inputs::<D>::new(color, g, st);
+    // Pass 1: window statistics -> per-window coefficients (a_k, b_k) (eqs. 8-9), written per
+    // row as `len` positions of K2 vectors.
+    let coef_row = st.len * K2 * S;
+    let mut coef = Buf::uninit(h * coef_row);
+    let inside: Vec<V> = (0..st.len).map(|j| st.inside(j)).collect();
+    let pass1 = Pass1::<D> { inputs: &inputs, eps, inside: &inside };
+    strip_box_sums::<K1, _>(&st, &mut coef, coef_row, &pass1, isa);
     // Pass 2: average the coefficients over the windows covering each pixel and apply them.
-    let pass2 = Pass2::<D, K2> { args, guide, coef: &coef };
-    box_sums::<K2, _>(w, h, r, out.data_mut(), 3, &pass2);
-    crate::pool::give(coef);
+    let pass2 = Pass2::<D, K2> { inputs: &inputs, coef: &coef, row: coef_row };
+    strip_box_sums::<K2, _>(&st, out.data_mut(), 3 * w, &pass2, isa);
 }
 
 struct Pass1<'a, const D: usize> {
-    args: &'a Args<'a>,
-    guide: &'a [&'a [f32]; D],
+    inputs: &'a Inputs<D>,
     eps: [f32; D],
-    kp: usize,
-    kc: usize,
+    /// Per position, 1 on the lanes inside the image: windows centred on padding are empty.
+    inside: &'a [V],
 }
 
-impl<const D: usize, const K1: usize> BoxPass<K1> for Pass1<'_, D> {
-    /// `m, m I, m I I^T, m p, m I p` of a pixel.
+/// The inputs of 16 pixels that the pass-1 quantities are products of.
+struct Px<const D: usize> {
+    m: V,
+    /// `m I_a` (m is 0 or 1, so `(m I_a)(m I_b) = m I_a I_b`).
+    i: [V; D],
+    p: [V; 3],
+}
+
+impl<const D: usize> Px<D> {
     #[inline(always)]
-    fn quantities(&self, x: usize, y: usize) -> [f32; K1] {
-        let (args, kp, kc) = (self.args, self.kp, self.kc);
-        let j = y * args.w + x;
-        let m = args.mask[j];
-        let mut i = [0.0f32; D];
-        for a in 0..D {
-            i[a] = m * self.guide[a][j];
+    fn load(inp: &Inputs<D>, y: usize, j: usize) -> Self {
+        let m = inp.get(D + P_MASK, y, j);
+        Self {
+            m,
+            i: std::array::from_fn(|a| vmul(m, inp.get(a, y, j))),
+            p: std::array::from_fn(|c| inp.get(D + P_COLOR + c, y, j)),
         }
-        let p = [args.p[0][j], args.p[1][j], args.p[2][j]];
-        let mut q = [0.0f32; K1];
-        q[0] = m;
-        let mut k = 1;
-        for a in 0..D {
-            q[k] = i[a];
-            k += 1;
+    }
+
+    /// A row outside the image: contributes nothing.
+    #[inline(always)]
+    fn zero() -> Self {
+        Self { m: [0.0; S], i: [[0.0; S]; D], p: [[0.0; S]; 3] }
+    }
+}
+
+impl<const D: usize, const K1: usize> StripPass<K1> for Pass1<'_, D> {
+    /// Adds / subtracts `m, m I, m I I^T, m p, m I p` of 16 pixels, in the order of [`k1`].
+    /// (Written out without closures: a closure per quantity was compiled out of line,
+    /// without the AVX-512 features, 1.6x slower.) A missing row is taken as zeros:
+    /// `(c + q) - 0 = c + q` and `(c + 0) - q = c - q` exactly.
+    #[inline(always)]
+    fn update(&self, j: usize, y_add: Option<usize>, y_sub: Option<usize>, col: &mut [V; K1]) {
+        if y_add.is_none() && y_sub.is_none() {
+            return;
         }
-        // m I_a I_b = (m I_a) I_b / m... m is 0 or 1, so (m I_a)(m I_b) is the same.
-        for a in 0..D {
-            for b in a..D {
-                q[k] = i[a] * i[b];
+        let inp = self.inputs;
+        let a = y_add.map_or_else(Px::zero, |y| Px::load(inp, y, j));
+        let s = y_sub.map_or_else(Px::zero, |y| Px::load(inp, y, j));
+        let mut k = 0;
+        macro_rules! upd {
+            ($qa:expr, $qs:expr) => {{
+                col[k] = vsub(vadd(col[k], $qa), $qs);
                 k += 1;
+            }};
+        }
+        upd!(a.m, s.m);
+        for t in 0..D {
+            upd!(a.i[t], s.i[t]);
+        }
+        for t in 0..D {
+            for u in t..D {
+                upd!(vmul(a.i[t], a.i[u]), vmul(s.i[t], s.i[u]));
             }
         }
         for c in 0..3 {
-            q[kp + c] = m * p[c];
+            upd!(vmul(a.m, a.p[c]), vmul(s.m, s.p[c]));
         }
-        for a in 0..D {
+        for t in 0..D {
             for c in 0..3 {
-                q[kc + a * 3 + c] = i[a] * p[c];
+                upd!(vmul(a.i[t], a.p[c]), vmul(s.i[t], s.p[c]));
             }
         }
-        q
+        debug_assert_eq!(k, K1);
     }
 
     #[inline(always)]
-    fn consume(&self, _x0: usize, _y: usize, sums: &[[f32; K1]], out: &mut [f32]) {
-        let k2 = out.len() / sums.len();
-        // 8 windows at a time across SIMD lanes; the remainder one by one.
-        let full = sums.len() / LANES * LANES;
-        for (s, o) in sums[..full].chunks_exact(LANES).zip(out.chunks_exact_mut(k2 * LANES)) {
-            solve_windows_lanes::<D, K1>(s, &self.eps, self.kp, self.kc, o);
-        }
-        for (s, o) in sums[full..].iter().zip(out[full * k2..].chunks_exact_mut(k2)) {
-            solve_window::<D, K1>(s, &self.eps, self.kp, self.kc, o);
-        }
+    fn consume(&self, _y: usize, j: usize, sums: &[V; K1], out_row: &mut [f32]) {
+        let k2 = 4 + 3 * D;
+        let o = vecs_mut(&mut out_row[j * k2 * S..(j + 1) * k2 * S]);
+        solve_lanes::<D, K1>(sums, &self.eps, &self.inside[j], o);
     }
 }
 
 struct Pass2<'a, const D: usize, const K2: usize> {
-    args: &'a Args<'a>,
-    guide: &'a [&'a [f32]; D],
+    inputs: &'a Inputs<D>,
     coef: &'a [f32],
+    /// Values per coefficient row.
+    row: usize,
 }
 
-impl<const D: usize, const K2: usize> BoxPass<K2> for Pass2<'_, D, K2> {
+impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
     #[inline(always)]
-    fn quantities(&self, x: usize, y: usize) -> [f32; K2] {
-        let j = (y * self.args.w + x) * K2;
-        let mut q = [0.0f32; K2];
-        q.copy_from_slice(&self.coef[j..j + K2]);
-        q
+    fn update(&self, j: usize, y_add: Option<usize>, y_sub: Option<usize>, col: &mut [V; K2]) {
+        let coef = |y: usize| &self.coef[y * self.row + j * K2 * S..][..K2 * S];
+        let c = col.as_flattened_mut();
+        // Flat loops over the K2 * S values (see `stripbox::add`).
+        match (y_add, y_sub) {
+            (Some(a), Some(s)) => {
+                for (c, (a, s)) in c.iter_mut().zip(coef(a).iter().zip(coef(s))) {
+                    *c = (*c + a) - s;
+                }
+            }
+            (Some(a), None) => c.iter_mut().zip(coef(a)).for_each(|(c, a)| *c += a),
+            (None, Some(s)) => c.iter_mut().zip(coef(s)).for_each(|(c, s)| *c -= s),
+            (None, None) => {}
+        }
     }
 
-    /// `q_i = mean(a) . I_i + mean(b)` over the windows that hold fit pixels.
+    /// `q_i = mean(a) . I_i + mean(b)` over the windows that hold fit pixels; background
+    /// (or an isolated invalid pixel) passes the sanitised input through.
     #[inline(always)]
-    fn consume(&self, x0: usize, y: usize, sums: &[[f32; K2]], out: &mut [f32]) {
-        let (args, guide) = (self.args, self.guide);
-        let o = y * args.w + x0;
-        for (x, (s, px)) in sums.iter().zip(out.chunks_exact_mut(3)).enumerate() {
-            let i = o + x;
-            let n = s[0];
-            if args.surface[i] > 0.0 && n > 0.5 {
-                let inv = 1.0 / n;
-                for c in 0..3 {
-                    let mut q = s[1 + 3 * D + c];
-                    for a in 0..D {
-                        q += s[1 + a * 3 + c] * guide[a][i];
-                    }
-                    px[c] = q * inv;
-                }
-            } else {
-                // Background (or an isolated invalid pixel): pass the sanitised input through.
-                for c in 0..3 {
-                    px[c] = args.p[c][i];
-                }
+    fn consume(&self, y: usize, j: usize, s: &[V; K2], out_row: &mut [f32]) {
+        let inp = self.inputs;
+        let st = &inp.st;
+        let n = s[0];
+        let surface = inp.get(D + P_SURFACE, y, j);
+        let fit: [bool; S] = std::array::from_fn(|l| surface[l] > 0.0 && n[l] > 0.5);
+        let inv: V = std::array::from_fn(|l| 1.0 / if fit[l] { n[l] } else { 1.0 });
+        let guide: [V; D] = std::array::from_fn(|a| inp.get(a, y, j));
+        let mut q = [[0.0f32; S]; 3];
+        for c in 0..3 {
+            let p = inp.get(D + P_COLOR + c, y, j);
+            let mut v = s[1 + 3 * D + c];
+            for a in 0..D {
+                v = vadd(v, vmul(s[1 + a * 3 + c], guide[a]));
+            }
+            let v = vmul(v, inv);
+            q[c] = std::array::from_fn(|l| if fit[l] { v[l] } else { p[l] });
+        }
+        for l in 0..st.lanes_in_image(j) {
+            let x = l * st.len + j;
+            for c in 0..3 {
+                out_row[3 * x + c] = q[c][l];
             }
         }
     }
 }
 
-/// Windows solved together by [`solve_windows_lanes`].
-const LANES: usize = 8;
-
-/// [`solve_window`] for `LANES` windows at once, every scalar of the solve held as one value
-/// per window (`[f32; LANES]`) so that each step is a vector operation across windows.
-/// Same operations in the same order per window, so the results are bit-identical to
-/// [`solve_window`] (tested); windows without a fit pixel are computed with `n = 1` and
-/// then written as zeros.
+/// From the window sums `s` of 16 windows (one per lane), the ridge-regression coefficients
+/// of each window, written as `[1, a (a*3+c), b (c)]`, or all zeros when the window holds no
+/// fit pixel or is centred outside the image (`inside` 0). Every scalar of the solve is one
+/// vector across the windows; branch-free, the divisions by the Cholesky diagonal done
+/// once as reciprocals. Same operations per lane as [`solve_window`] (bit-identical, tested).
 #[inline(always)]
-fn solve_windows_lanes<const D: usize, const K1: usize>(
-    s: &[[f32; K1]],
-    eps: &[f32; D],
-    kp: usize,
-    kc: usize,
-    o: &mut [f32],
-) {
-    type V = [f32; LANES];
-    let s: &[[f32; K1]; LANES] = s.try_into().expect("LANES windows");
-    let k2 = o.len() / LANES;
-    let get = |k: usize| -> V { std::array::from_fn(|l| s[l][k]) };
-    let n = get(0);
-    let ok: [bool; LANES] = std::array::from_fn(|l| n[l] >= 0.5);
-    let inv: V = std::array::from_fn(|l| 1.0 / if ok[l] { n[l] } else { 1.0 });
-    let mut mi = [[0.0f32; LANES]; D];
-    for a in 0..D {
-        let v = get(1 + a);
-        mi[a] = std::array::from_fn(|l| v[l] * inv[l]);
-    }
-    let mut sig = [[[0.0f32; LANES]; D]; D];
+fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], inside: &V, o: &mut [V]) {
+    let kp = 1 + D + D * (D + 1) / 2; // index of m p
+    let kc = kp + 3; // index of m I p
+                     // `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
+    let fms = |c: V, a: V, b: V| -> V { vsub(c, vmul(a, b)) };
+    let n = s[0];
+    let ok: [bool; S] = std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0);
+    let inv: V = n.map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });
+    let mi: [V; D] = std::array::from_fn(|a| vmul(s[1 + a], inv));
+    // Sigma_k + eps U
+    let mut sig = [[[0.0f32; S]; D]; D];
     let mut k = 1 + D;
     for a in 0..D {
         for b in a..D {
-            let sk = get(k);
-            let v: V = std::array::from_fn(|l| sk[l] * inv[l] - mi[a][l] * mi[b][l]);
+            let v = fms(vmul(s[k], inv), mi[a], mi[b]);
             sig[a][b] = v;
             sig[b][a] = v;
             k += 1;
         }
     }
     for a in 0..D {
-        for l in 0..LANES {
-            sig[a][a][l] = sig[a][a][l].max(0.0) + eps[a];
-        }
+        sig[a][a] = sig[a][a].map(|v| v.max(0.0) + eps[a]);
     }
-    let mut mp = [[0.0f32; LANES]; 3];
-    for c in 0..3 {
-        let v = get(kp + c);
-        mp[c] = std::array::from_fn(|l| v[l] * inv[l]);
-    }
-    let mut cov = [[[0.0f32; LANES]; 3]; D];
-    for a in 0..D {
-        for c in 0..3 {
-            let v = get(kc + a * 3 + c);
-            cov[a][c] = std::array::from_fn(|l| v[l] * inv[l] - mi[a][l] * mp[c][l]);
-        }
-    }
-    let mut lm = [[[0.0f32; LANES]; D]; D];
+    let mp: [V; 3] = std::array::from_fn(|c| vmul(s[kp + c], inv));
+    // cov_k(I, p)
+    let cov: [[V; 3]; D] =
+        std::array::from_fn(|a| std::array::from_fn(|c| fms(vmul(s[kc + a * 3 + c], inv), mi[a], mp[c])));
+    // Cholesky Sigma = L L^T (SPD: the diagonal holds at least eps > 0); rl = 1 / L_jj.
+    let mut lm = [[[0.0f32; S]; D]; D];
+    let mut rl = [[0.0f32; S]; D];
     for j in 0..D {
         let mut d = sig[j][j];
         for k in 0..j {
-            for l in 0..LANES {
-                d[l] -= lm[j][k][l] * lm[j][k][l];
-            }
+            d = fms(d, lm[j][k], lm[j][k]);
         }
-        let ljj: V = std::array::from_fn(|l| d[l].max(1e-12 + eps[j] * 1e-6).sqrt());
-        lm[j][j] = ljj;
+        let floor = 1e-12 + eps[j] * 1e-6;
+        rl[j] = d.map(|v| 1.0 / v.max(floor).sqrt());
         for i in j + 1..D {
             let mut v = sig[i][j];
             for k in 0..j {
-                for l in 0..LANES {
-                    v[l] -= lm[i][k][l] * lm[j][k][l];
-                }
+                v = fms(v, lm[i][k], lm[j][k]);
             }
-            lm[i][j] = std::array::from_fn(|l| v[l] / ljj[l]);
+            lm[i][j] = vmul(v, rl[j]);
         }
     }
-    let mut res = [[[0.0f32; LANES]; 3]; D];
-    let mut bres = [[0.0f32; LANES]; 3];
+    let zero_if_out = |v: V| -> V { std::array::from_fn(|l| if ok[l] { v[l] } else { 0.0 }) };
+    o[0] = std::array::from_fn(|l| if ok[l] { 1.0 } else { 0.0 });
     for c in 0..3 {
-        let mut y = [[0.0f32; LANES]; D];
+        // L y = cov_c, then L^T a = y.
+        let mut y = [[0.0f32; S]; D];
         for i in 0..D {
             let mut v = cov[i][c];
             for k in 0..i {
-                for l in 0..LANES {
-                    v[l] -= lm[i][k][l] * y[k][l];
-                }
+                v = fms(v, lm[i][k], y[k]);
             }
-            y[i] = std::array::from_fn(|l| v[l] / lm[i][i][l]);
+            y[i] = vmul(v, rl[i]);
         }
-        let mut a = [[0.0f32; LANES]; D];
+        let mut a = [[0.0f32; S]; D];
         for i in (0..D).rev() {
             let mut v = y[i];
             for k in i + 1..D {
-                for l in 0..LANES {
-                    v[l] -= lm[k][i][l] * a[k][l];
-                }
+                v = fms(v, lm[k][i], a[k]);
             }
-            a[i] = std::array::from_fn(|l| v[l] / lm[i][i][l]);
+            a[i] = vmul(v, rl[i]);
         }
         let mut b = mp[c];
         for i in 0..D {
-            res[i][c] = a[i];
-            for l in 0..LANES {
-                b[l] -= a[i][l] * mi[i][l];
-            }
+            o[1 + i * 3 + c] = zero_if_out(a[i]);
+            b = fms(b, a[i], mi[i]);
         }
-        bres[c] = b;
-    }
-    for (l, ol) in o.chunks_exact_mut(k2).enumerate() {
-        ol.fill(0.0);
-        if !ok[l] {
-            continue;
-        }
-        ol[0] = 1.0;
-        for c in 0..3 {
-            for i in 0..D {
-                ol[1 + i * 3 + c] = res[i][c][l];
-            }
-            ol[1 + 3 * D + c] = bres[c][l];
-        }
+        o[1 + 3 * D + c] = zero_if_out(b);
     }
 }
 
-/// From the window sums `s`, the ridge-regression coefficients of one window, written as
-/// `[1, a (a*3+c), b (c), 0...]`, or all zeros when the window holds no fit pixel.
-#[inline(always)]
-fn solve_window<const D: usize, const K1: usize>(
-    s: &[f32; K1],
-    eps: &[f32; D],
-    kp: usize,
-    kc: usize,
-    o: &mut [f32],
-) {
+/// [`solve_lanes`] for one window, written plainly: the reference the lane solve is
+/// tested against (`o` as in [`solve_lanes`], 4 + 3D values).
+#[cfg(test)]
+fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], o: &mut [f32]) {
+    let kp = 1 + D + D * (D + 1) / 2;
+    let kc = kp + 3;
     o.fill(0.0);
     let n = s[0];
     if n < 0.5 {
@@ -467,7 +537,6 @@ fn solve_window<const D: usize, const K1: usize>(
     for a in 0..D {
         mi[a] = s[1 + a] * inv;
     }
-    // Sigma_k + eps U
     let mut sig = [[0.0f32; D]; D];
     let mut k = 1 + D;
     for a in 0..D {
@@ -482,40 +551,37 @@ fn solve_window<const D: usize, const K1: usize>(
         sig[a][a] = sig[a][a].max(0.0) + eps[a];
     }
     let mp = [s[kp] * inv, s[kp + 1] * inv, s[kp + 2] * inv];
-    // cov_k(I, p)
     let mut cov = [[0.0f32; 3]; D];
     for a in 0..D {
         for c in 0..3 {
             cov[a][c] = s[kc + a * 3 + c] * inv - mi[a] * mp[c];
         }
     }
-    // Cholesky Sigma = L L^T (SPD: the diagonal holds at least eps > 0).
     let mut l = [[0.0f32; D]; D];
+    let mut rl = [0.0f32; D];
     for j in 0..D {
         let mut d = sig[j][j];
         for k in 0..j {
             d -= l[j][k] * l[j][k];
         }
-        let ljj = d.max(1e-12 + eps[j] * 1e-6).sqrt();
-        l[j][j] = ljj;
+        rl[j] = 1.0 / d.max(1e-12 + eps[j] * 1e-6).sqrt();
         for i in j + 1..D {
             let mut v = sig[i][j];
             for k in 0..j {
                 v -= l[i][k] * l[j][k];
             }
-            l[i][j] = v / ljj;
+            l[i][j] = v * rl[j];
         }
     }
     o[0] = 1.0;
     for c in 0..3 {
-        // L y = cov_c, then L^T a = y.
         let mut y = [0.0f32; D];
         for i in 0..D {
             let mut v = cov[i][c];
             for k in 0..i {
                 v -= l[i][k] * y[k];
             }
-            y[i] = v / l[i][i];
+            y[i] = v * rl[i];
         }
         let mut a = [0.0f32; D];
         for i in (0..D).rev() {
@@ -523,7 +589,7 @@ fn solve_window<const D: usize, const K1: usize>(
             for k in i + 1..D {
                 v -= l[k][i] * a[k];
             }
-            a[i] = v / l[i][i];
+            a[i] = v * rl[i];
         }
         let mut b = mp[c];
         for i in 0..D {
@@ -538,11 +604,12 @@ fn solve_window<const D: usize, const K1: usize>(
 mod lane_tests {
     use super::*;
 
-    /// The 8-lane solve is bit-identical to the per-window solve, empty windows included.
+    /// The 16-lane solve is bit-identical to the per-window solve, empty windows and windows
+    /// centred outside the image included.
     #[test]
     fn lane_solve_matches_scalar_solve() {
         const D: usize = 4;
-        const K1: usize = 32;
+        const K1: usize = k1(D);
         let (kp, kc) = (1 + D + D * (D + 1) / 2, 1 + D + D * (D + 1) / 2 + 3);
         let mut state = 12345u32;
         let mut rnd = move || {
@@ -552,7 +619,7 @@ mod lane_tests {
         let eps = [1e-3, 2e-3, 1e-2, 5e-4];
         for trial in 0..50 {
             // Window sums of random pixel sets (so Sigma is a real covariance).
-            let mut sums = [[0.0f32; K1]; LANES];
+            let mut sums = [[0.0f32; K1]; S];
             for (l, s) in sums.iter_mut().enumerate() {
                 let count = if (trial + l) % 7 == 0 { 0 } else { 1 + (trial * 3 + l) % 20 };
                 for _ in 0..count {
@@ -580,13 +647,19 @@ mod lane_tests {
                     }
                 }
             }
-            let k2 = 4 + 3 * D;
-            let mut lanes = vec![7.0f32; k2 * LANES];
-            solve_windows_lanes::<D, K1>(&sums, &eps, kp, kc, &mut lanes);
-            for l in 0..LANES {
-                let mut one = vec![7.0f32; k2];
-                solve_window::<D, K1>(&sums[l], &eps, kp, kc, &mut one);
-                assert_eq!(&lanes[l * k2..(l + 1) * k2], &one[..], "trial {trial} lane {l}");
+            let lanes: [V; K1] = std::array::from_fn(|k| std::array::from_fn(|l| sums[l][k]));
+            let inside: V = std::array::from_fn(|l| if (trial + l) % 11 == 3 { 0.0 } else { 1.0 });
+            let mut o = [[7.0f32; S]; k2(D)];
+            solve_lanes::<D, K1>(&lanes, &eps, &inside, &mut o);
+            for l in 0..S {
+                let mut one = [7.0f32; k2(D)];
+                if inside[l] > 0.0 {
+                    solve_window::<D, K1>(&sums[l], &eps, &mut one);
+                } else {
+                    one = [0.0; k2(D)];
+                }
+                let got: Vec<f32> = o.iter().map(|v| v[l]).collect();
+                assert_eq!(got, one, "trial {trial} lane {l}");
             }
         }
     }

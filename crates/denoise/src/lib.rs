@@ -34,7 +34,6 @@
 
 pub mod atrous;
 pub mod bilateral;
-mod boxsum;
 pub mod demodulate;
 pub mod error;
 pub mod gbuffer;
@@ -42,6 +41,7 @@ pub mod guided;
 mod kernel;
 mod pool;
 pub mod simd;
+mod stripbox;
 mod symmetric;
 
 #[cfg(test)]

@@ -230,6 +230,38 @@ fn atrous_is_identical_for_any_thread_count() {
     }
 }
 
+/// The guided filter's bands and lane strips follow the image size and radius only: the
+/// result is bit-identical on 1, 2, 3 and 7 threads (several bands: 300 rows at r = 5), and
+/// the baseline build computes the same bits as the AVX2 / AVX-512 ones (no fused
+/// multiply-adds in the guided filter).
+#[test]
+fn guided_is_identical_for_any_thread_count_and_build() {
+    let mut rng = Rng::new(13);
+    let (w, h) = (157, 300);
+    let g = random_gbuffer(w, h, &mut rng, true);
+    let mut color = random_color(w, h, &mut rng);
+    color.pixel_mut(40, 150)[0] = f32::NAN;
+    for p in [
+        GuidedParams { radius: 5, ..GuidedParams::paper() },
+        GuidedParams::grey(),
+        GuidedParams::normal_only(),
+    ] {
+        let run = |threads: usize, isa: crate::simd::Isa| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| crate::guided::guided_with_isa(&color, &g, &p, isa).unwrap())
+        };
+        let one = run(1, crate::simd::isa());
+        assert_eq!(one.count_non_finite(), 0);
+        for threads in [2, 3, 7] {
+            assert!(
+                one.data() == run(threads, crate::simd::isa()).data(),
+                "{p:?}: {threads} threads differ from 1"
+            );
+        }
+        assert!(one.data() == run(2, crate::simd::Isa::Base).data(), "{p:?}: baseline build differs");
+    }
+}
+
 #[test]
 fn bilateral_matches_naive() {
     let mut rng = Rng::new(2);

@@ -137,6 +137,21 @@ struct Blas {
     /// No hierarchy: every query tests all packets, as one leaf
     /// ([`BuildParams::max_flat_triangles`]); `nodes` and `nodes8` are empty.
     flat: bool,
+    /// Flat bottom levels only: the triangle of lane `l` of packet `p` at `4 p + l` as
+    /// one `[x, y, z, x]` row per corner (NaN for unused lanes), from which the 8-ray
+    /// packet kernels pick each ray's permuted axes with one shuffle per coordinate.
+    corners: Vec<Corners>,
+}
+
+/// The three corners of a triangle as 16-byte aligned rows `[x, y, z, x]`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug)]
+struct Corners([[f32; 4]; 3]);
+
+impl Corners {
+    fn of(tri: &triangle::Tri) -> Self {
+        Self(tri.map(|[x, y, z]| [x, y, z, x]))
+    }
 }
 
 impl Blas {
@@ -186,7 +201,16 @@ impl Blas {
             Simd::Sse => (wide::collapse(&root, &mut leaf), Vec::new()),
             Simd::Avx2 => (Vec::new(), wide::collapse(&root, &mut leaf)),
         };
-        Self { nodes, nodes8, packets, prim_ids, tri_count: ids.len(), bounds: root.bounds(), flat: false }
+        Self {
+            nodes,
+            nodes8,
+            packets,
+            prim_ids,
+            tri_count: ids.len(),
+            bounds: root.bounds(),
+            flat: false,
+            corners: Vec::new(),
+        }
     }
 
     /// The flat bottom level of a tiny mesh: triangles `ids` (boxes `boxes`) in packets,
@@ -198,12 +222,13 @@ impl Blas {
         };
         let mut order: Vec<usize> = (0..ids.len()).collect();
         order.sort_by(|&i, &j| area(j).total_cmp(&area(i)).then(i.cmp(&j)));
-        let packets = order
+        let packets: Vec<Tri4> = order
             .chunks(4)
             .map(|c| {
                 Tri4::pack(&c.iter().map(|&k| tri(ids[k] as usize).map(|v| v.to_array())).collect::<Vec<_>>())
             })
             .collect();
+        let corners = packets.iter().flat_map(|p| (0..4).map(|l| Corners::of(&p.lane(l)))).collect();
         let prim_ids = order
             .chunks(4)
             .flat_map(|c| (0..4).map(move |l| c.get(l).map_or(u32::MAX, |&k| ids[k])))
@@ -216,6 +241,7 @@ impl Blas {
             tri_count: ids.len(),
             bounds: boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union),
             flat: true,
+            corners,
         }
     }
 

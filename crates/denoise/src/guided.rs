@@ -206,7 +206,7 @@ impl<const D: usize> Inputs<D> {
     const PLANES: usize = D + 5;
 
     /// Converts the interleaved colour and guides (one pass over them, rows in parallel).
-    fn new(color: &Image, g: &GBuffer, st: Strips) -> Self {
+    fn new(color: &Image, g: &GBuffer, st: Strips, isa: Isa) -> Self {
         let (w, len) = (st.w, st.len);
         let row = Self::PLANES * len * S;
         let mut data = Buf::uninit(st.h * row);
@@ -229,46 +229,12 @@ impl<const D: usize> Inputs<D> {
             });
             (d.data(), 1.0 / scale)
         });
-        let (c, n) = (color.data(), g.normal.data());
+        let src = Src { c: color.data(), n: g.normal.data(), depth };
+        // (`convert_row` writes every lane, padding included: no need to clear `data`.)
         let rows_per_item = (16 * 1024 / w).max(1);
         data.par_chunks_mut(rows_per_item * row).enumerate().for_each(|(item, rows)| {
-            rows.fill(0.0);
             for (ry, out) in rows.chunks_exact_mut(row).enumerate() {
-                let y = item * rows_per_item + ry;
-                for l in 0..st.segs {
-                    for j in 0..len.min(w.saturating_sub(l * len)) {
-                        let i = y * w + l * len + j;
-                        let px = &n[3 * i..3 * i + 3];
-                        let surface = is_surface(px);
-                        let inv = if surface {
-                            1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt()
-                        } else {
-                            0.0
-                        };
-                        let nn = if surface { [px[0] * inv, px[1] * inv, px[2] * inv] } else { [0.0; 3] };
-                        let mut put = |q: usize, v: f32| out[(q * len + j) * S + l] = v;
-                        if D == 1 {
-                            // The mean of the [0,1]-scaled normal, centred: (n0 + n1 + n2) / 6.
-                            put(0, (nn[0] + nn[1] + nn[2]) / 6.0);
-                        } else {
-                            for a in 0..3 {
-                                put(a, 0.5 * nn[a]);
-                            }
-                        }
-                        if let Some((d, inv_scale)) = depth {
-                            let v = d[i];
-                            put(3, if v.is_finite() { v * inv_scale } else { 0.0 } - 0.5);
-                        }
-                        let cp = &c[3 * i..3 * i + 3];
-                        let valid = cp.iter().all(|v| v.is_finite());
-                        for k in 0..3 {
-                            put(D + P_COLOR + k, if valid { cp[k] } else { 0.0 });
-                        }
-                        let s = if surface { 1.0 } else { 0.0 };
-                        put(D + P_MASK, if valid { s } else { 0.0 });
-                        put(D + P_SURFACE, s);
-                    }
-                }
+                convert_row_isa::<D>(&st, &src, item * rows_per_item + ry, vecs_mut(out), isa);
             }
         });
         Self { st, data }
@@ -279,6 +245,80 @@ impl<const D: usize> Inputs<D> {
     fn get(&self, q: usize, y: usize, j: usize) -> V {
         vecs(&self.data)[(y * Self::PLANES + q) * self.st.len + j]
     }
+}
+
+/// The interleaved inputs of [`Inputs::new`]: colour, normal, `(depth, 1 / depth scale)`.
+struct Src<'a> {
+    c: &'a [f32],
+    n: &'a [f32],
+    depth: Option<(&'a [f32], f32)>,
+}
+
+/// Row `y` of [`Inputs`] (`out`: its `D + 5` planes of `len` vectors): position by
+/// position, the 16 pixels `len` apart gathered into lanes and converted as vectors.
+#[inline(always)]
+fn convert_row<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) {
+    let (w, len) = (st.w, st.len);
+    for j in 0..len {
+        let mut v = [[0.0f32; S]; 9]; // D + 5 <= 9 planes
+                                      // One lane per segment; lanes past the image's end stay 0 (background, no fit).
+        for l in 0..st.lanes_in_image(j) {
+            let i = y * w + l * len + j;
+            let px = &src.n[3 * i..3 * i + 3];
+            // Surface: finite, non-zero normal (`is_surface`), normalised; 0 on background.
+            let surface = is_surface(px);
+            let inv =
+                if surface { 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt() } else { 0.0 };
+            let nn = if surface { [px[0] * inv, px[1] * inv, px[2] * inv] } else { [0.0; 3] };
+            if D == 1 {
+                // The mean of the [0,1]-scaled normal, centred: (n0 + n1 + n2) / 6.
+                v[0][l] = (nn[0] + nn[1] + nn[2]) / 6.0;
+            } else {
+                for a in 0..3 {
+                    v[a][l] = 0.5 * nn[a];
+                }
+            }
+            if let Some((d, inv_scale)) = src.depth {
+                let dv = d[i];
+                v[3][l] = if dv.is_finite() { dv * inv_scale } else { 0.0 } - 0.5;
+            }
+            let cp = &src.c[3 * i..3 * i + 3];
+            let valid = cp[0].is_finite() && cp[1].is_finite() && cp[2].is_finite();
+            for k in 0..3 {
+                v[D + P_COLOR + k][l] = if valid { cp[k] } else { 0.0 };
+            }
+            let s = if surface { 1.0 } else { 0.0 };
+            v[D + P_MASK][l] = if valid { s } else { 0.0 };
+            v[D + P_SURFACE][l] = s;
+        }
+        for (q, v) in v[..D + 5].iter().enumerate() {
+            out[q * len + j] = *v;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn convert_row_avx512<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) {
+    convert_row::<D>(st, src, y, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn convert_row_avx2<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) {
+    convert_row::<D>(st, src, y, out)
+}
+
+fn convert_row_isa<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V], isa: Isa) {
+    #[cfg(target_arch = "x86_64")]
+    match isa {
+        // SAFETY: `isa()` reports Avx512 / Avx2 only when those features were detected.
+        Isa::Avx512 => return unsafe { convert_row_avx512::<D>(st, src, y, out) },
+        Isa::Avx2 => return unsafe { convert_row_avx2::<D>(st, src, y, out) },
+        Isa::Base => {}
+    }
+    let _ = isa;
+    convert_row::<D>(st, src, y, out)
 }
 
 /// `K1`, `K2`: quantity counts of the two box passes (see [`k1`], [`k2`]).
@@ -292,7 +332,7 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
 ) {
     let (w, h) = (color.width(), color.height());
     let st = Strips::new(w, h, r);
-    let inputs = Inputs::<D>::new(color, g, st);
+    let inputs = Inputs::<D>::new(color, g, st, isa);
     // Pass 1: window statistics -> per-window coefficients (a_k, b_k) (eqs. 8-9), written per
     // row as `len` positions of K2 vectors.
     let coef_row = st.len * K2 * S;
@@ -323,12 +363,16 @@ struct Px<const D: usize> {
 impl<const D: usize> Px<D> {
     #[inline(always)]
     fn load(inp: &Inputs<D>, y: usize, j: usize) -> Self {
-        let m = inp.get(D + P_MASK, y, j);
-        Self {
-            m,
-            i: std::array::from_fn(|a| vmul(m, inp.get(a, y, j))),
-            p: std::array::from_fn(|c| inp.get(D + P_COLOR + c, y, j)),
+        // Loops into zeroed arrays rather than `array::from_fn`, which was compiled out of line.
+        let mut px = Self::zero();
+        px.m = inp.get(D + P_MASK, y, j);
+        for a in 0..D {
+            px.i[a] = vmul(px.m, inp.get(a, y, j));
         }
+        for c in 0..3 {
+            px.p[c] = inp.get(D + P_COLOR + c, y, j);
+        }
+        px
     }
 
     /// A row outside the image: contributes nothing.
@@ -349,8 +393,15 @@ impl<const D: usize, const K1: usize> StripPass<K1> for Pass1<'_, D> {
             return;
         }
         let inp = self.inputs;
-        let a = y_add.map_or_else(Px::zero, |y| Px::load(inp, y, j));
-        let s = y_sub.map_or_else(Px::zero, |y| Px::load(inp, y, j));
+        // (`match`, not `map_or_else`: its closure was compiled out of line.)
+        let a = match y_add {
+            Some(y) => Px::load(inp, y, j),
+            None => Px::zero(),
+        };
+        let s = match y_sub {
+            Some(y) => Px::load(inp, y, j),
+            None => Px::zero(),
+        };
         let mut k = 0;
         macro_rules! upd {
             ($qa:expr, $qs:expr) => {{
@@ -421,7 +472,10 @@ impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
         let surface = inp.get(D + P_SURFACE, y, j);
         let fit: [bool; S] = std::array::from_fn(|l| surface[l] > 0.0 && n[l] > 0.5);
         let inv: V = std::array::from_fn(|l| 1.0 / if fit[l] { n[l] } else { 1.0 });
-        let guide: [V; D] = std::array::from_fn(|a| inp.get(a, y, j));
+        let mut guide = [[0.0f32; S]; D];
+        for a in 0..D {
+            guide[a] = inp.get(a, y, j);
+        }
         let mut q = [[0.0f32; S]; 3];
         for c in 0..3 {
             let p = inp.get(D + P_COLOR + c, y, j);
@@ -455,7 +509,10 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
     let n = s[0];
     let ok: [bool; S] = std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0);
     let inv: V = n.map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });
-    let mi: [V; D] = std::array::from_fn(|a| vmul(s[1 + a], inv));
+    let mut mi = [[0.0f32; S]; D];
+    for a in 0..D {
+        mi[a] = vmul(s[1 + a], inv);
+    }
     // Sigma_k + eps U
     let mut sig = [[[0.0f32; S]; D]; D];
     let mut k = 1 + D;
@@ -470,10 +527,17 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
     for a in 0..D {
         sig[a][a] = sig[a][a].map(|v| v.max(0.0) + eps[a]);
     }
-    let mp: [V; 3] = std::array::from_fn(|c| vmul(s[kp + c], inv));
+    let mut mp = [[0.0f32; S]; 3];
+    for c in 0..3 {
+        mp[c] = vmul(s[kp + c], inv);
+    }
     // cov_k(I, p)
-    let cov: [[V; 3]; D] =
-        std::array::from_fn(|a| std::array::from_fn(|c| fms(vmul(s[kc + a * 3 + c], inv), mi[a], mp[c])));
+    let mut cov = [[[0.0f32; S]; 3]; D];
+    for a in 0..D {
+        for c in 0..3 {
+            cov[a][c] = fms(vmul(s[kc + a * 3 + c], inv), mi[a], mp[c]);
+        }
+    }
     // Cholesky Sigma = L L^T (SPD: the diagonal holds at least eps > 0); rl = 1 / L_jj.
     let mut lm = [[[0.0f32; S]; D]; D];
     let mut rl = [[0.0f32; S]; D];

@@ -68,7 +68,8 @@ pub fn exp_neg_g<const F: bool>(x: f32) -> f32 {
 pub fn scaled_exp_neg<const F: bool>(x: f32, log2_h: f32) -> f32 {
     const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23: adding it rounds to an integer
     let t = madd::<F>(x, -std::f32::consts::LOG2_E, log2_h);
-    if t < SCALED_EXP_MIN_LOG2 || t.is_nan() {
+    // One comparison for both: false for NaN.
+    if !(t >= SCALED_EXP_MIN_LOG2) {
         return 0.0;
     }
     let tm = t + MAGIC;

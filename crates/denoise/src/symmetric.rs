@@ -285,6 +285,18 @@ fn gather_row<const V: bool, const B: usize, const F: bool>(
             0
         }
     });
+    // The off-centre taps of the row: (ring position of pixel x = 0, flat colour offset
+    // modulo 2^64), forward then backward.
+    let mut taps = [(0usize, 0usize); 24];
+    let mut nt = 0;
+    for k in 0..nf {
+        taps[nt] = (fr[k], lv.half[k].2);
+        nt += 1;
+    }
+    for k in 0..nb {
+        taps[nt] = (br[k], lv.half[k].2.wrapping_neg());
+        nt += 1;
+    }
     let [o0, o1, o2] = out;
     for x in block_starts::<B>(w) {
         let p = y * a.stride + x;
@@ -301,28 +313,47 @@ fn gather_row<const V: bool, const B: usize, const F: bool>(
             continue;
         }
         let pc = ldu3::<B>(&a.c, p);
-        let mut acc = [[0.0f32; B]; 4];
+        let vp = if V { ldu::<B>(a.v.unwrap_or(a.s), p) } else { [0.0; B] };
+        // The centre tap, then the off-centre taps of the list alternately into two sets of
+        // accumulators (two independent multiply-add chains: one chain waited on the
+        // multiply-add latency at every tap), added at the end. The accumulators are plain
+        // locals carried through the loop: with a closure per tap they were kept in memory,
+        // a store and a reload per tap (perf annotate).
+        let mut acc = [[[0.0f32; B]; 4]; 2];
+        for i in 0..B {
+            let wi = if V { lv.h_centre * vp[i] } else { lv.h_centre };
+            for c in 0..3 {
+                acc[0][c][i] = wi * pc[c][i];
+            }
+            acc[0][3][i] = wi;
+        }
         // In bounds: interior (x -/+ 2 step inside the row) or checked by `in_flat`; rows
         // y -/+ dy checked by nf / nb; ring rows padded by 2 step.
-        let mut tap = |wq: [f32; B], q: usize| {
+        let tap = |acc: &mut [[f32; B]; 4], (rb, off): (usize, usize)| {
+            let wq = ldu::<B>(ring, rb.wrapping_add(x));
+            let q = p.wrapping_add(off);
             let qc = ldu3::<B>(&a.c, q);
             let qv = if V { ldu::<B>(a.v.unwrap_or(a.s), q) } else { [0.0; B] };
             for i in 0..B {
                 let wi = if V { wq[i] * qv[i] } else { wq[i] };
-                acc[0][i] = madd::<F>(wi, qc[0][i], acc[0][i]);
-                acc[1][i] = madd::<F>(wi, qc[1][i], acc[1][i]);
-                acc[2][i] = madd::<F>(wi, qc[2][i], acc[2][i]);
+                for c in 0..3 {
+                    acc[c][i] = madd::<F>(wi, qc[c][i], acc[c][i]);
+                }
                 acc[3][i] += wi;
             }
         };
-        tap([lv.h_centre; B], p);
-        for k in 0..nf {
-            tap(ldu::<B>(ring, fr[k] + x), p.wrapping_add(lv.half[k].2));
+        let [mut s0, mut s1] = acc;
+        let pairs = taps[..nt].chunks_exact(2);
+        let rest = pairs.remainder();
+        for t in pairs {
+            tap(&mut s0, t[0]);
+            tap(&mut s1, t[1]);
         }
-        for k in 0..nb {
-            tap(ldu::<B>(ring, br[k].wrapping_add(x)), p.wrapping_sub(lv.half[k].2));
+        for t in rest {
+            tap(&mut s0, *t);
         }
-        normalise::<B>(&acc, &pc, [&mut o0[x..x + B], &mut o1[x..x + B], &mut o2[x..x + B]]);
+        let sum: [[f32; B]; 4] = std::array::from_fn(|c| std::array::from_fn(|i| s0[c][i] + s1[c][i]));
+        normalise::<B>(&sum, &pc, [&mut o0[x..x + B], &mut o1[x..x + B], &mut o2[x..x + B]]);
     }
     if w < B {
         gather_pixels::<V, F>(a, lv, y, 0..w, (nf, nb), (&fr, &br), ring, [o0, o1, o2]);

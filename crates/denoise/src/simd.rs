@@ -65,6 +65,8 @@ pub fn exp_neg_g<const F: bool>(x: f32) -> f32 {
 /// coarse À-Trous levels, where `w_rt`'s exponent is large, ran 1.5x slower than the fine
 /// ones: bench filters, 1080p).
 #[inline(always)]
+// `!(t >= min)` on purpose: one comparison that is also true for NaN.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn scaled_exp_neg<const F: bool>(x: f32, log2_h: f32) -> f32 {
     const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23: adding it rounds to an integer
     let t = madd::<F>(x, -std::f32::consts::LOG2_E, log2_h);

@@ -16,11 +16,16 @@
 //! callers reach only when [`crate::Simd::Avx2`] is available.
 
 use crate::packet::{RayPacket, LANES};
+use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
+use crate::wide::Node8;
 use crate::wide::{CULL_SCALE, FAR_SCALE};
 use crate::{Blas, Corners};
-use filtrace_core::Aabb;
+use filtrace_core::{Aabb, Vec3};
+
+/// Packet traversal stack depth: each 8-wide level pushes at most seven entries.
+const STACK8: usize = 7 * MAX_DEPTH + 8;
 use std::arch::x86_64::*;
 
 /// Eight lanes, 32-byte aligned (for aligned vector loads and stores).
@@ -459,4 +464,323 @@ fn any_scalar(rays: &RayPacket, lanes: u32, tri: &Tri) -> u32 {
         }
     }
     hit
+}
+
+/// A box through which every finite ray passes (BVH bottom levels have no bounds check
+/// before the root node; the root node's box test does that).
+const EVERYWHERE: Aabb = Aabb { min: Vec3::splat(f32::NEG_INFINITY), max: Vec3::splat(f32::INFINITY) };
+
+/// Per-lane constants of the fused 8-wide box test, lane for lane those of
+/// `avx2::RayBoxes8::new`; the near/far bound rows are shared, which needs every active
+/// lane to have the same direction signs.
+struct Boxes8 {
+    inv: [__m256; 3],
+    oinv_near: [__m256; 3],
+    oinv_far: [__m256; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl Boxes8 {
+    /// `None` when the lanes `active` differ in direction sign on some axis (lanes with
+    /// NaN directions count as differing).
+    #[inline(always)]
+    unsafe fn new(rays: &RayPacket, active: u32) -> Option<Self> {
+        // Sign bits first (incoherent packets stop here, before any division).
+        for d in &rays.dir {
+            let neg = _mm256_movemask_ps(ld(d)) as u32 & active;
+            if neg != 0 && neg != active {
+                return None;
+            }
+        }
+        let sign = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MIN));
+        let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+        let tiny = _mm256_set1_ps(1e-30);
+        let mut b = Self {
+            inv: [_mm256_setzero_ps(); 3],
+            oinv_near: [_mm256_setzero_ps(); 3],
+            oinv_far: [_mm256_setzero_ps(); 3],
+            near: [0; 3],
+            far: [0; 3],
+        };
+        for k in 0..3 {
+            let (o, d) = (ld(&rays.origin[k]), ld(&rays.dir[k]));
+            // `d` with components below 1e-30 in magnitude replaced by +-1e-30.
+            let small = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(d, abs), tiny);
+            let d = _mm256_blendv_ps(d, _mm256_or_ps(_mm256_and_ps(d, sign), tiny), small);
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
+            let c = _mm256_mul_ps(o, inv);
+            let e = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_and_ps(c, abs), _mm256_set1_ps(1.0 / (1u32 << 21) as f32)),
+                tiny,
+            );
+            b.inv[k] = inv;
+            b.oinv_near[k] = _mm256_add_ps(c, e);
+            b.oinv_far[k] = _mm256_sub_ps(c, e);
+            let pos =
+                _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(inv, _mm256_setzero_ps())) as u32 & active;
+            (b.near[k], b.far[k]) = if pos == active {
+                (k, k + 3)
+            } else if pos == 0 {
+                (k + 3, k)
+            } else {
+                return None;
+            };
+        }
+        Some(b)
+    }
+
+    /// Lanes of `lanes` whose rays touch child `i` of `n` (the test of `avx2::box8`, lane
+    /// for lane) and their entry distances.
+    #[inline(always)]
+    unsafe fn child(
+        &self,
+        n: &Node8,
+        i: usize,
+        t_min: __m256,
+        t_cull: __m256,
+        lanes: __m256,
+    ) -> (u32, __m256) {
+        let b = &n.bounds;
+        let nx = _mm256_fmsub_ps(_mm256_set1_ps(b[self.near[0]][i]), self.inv[0], self.oinv_near[0]);
+        let fx = _mm256_fmsub_ps(_mm256_set1_ps(b[self.far[0]][i]), self.inv[0], self.oinv_far[0]);
+        let ny = _mm256_fmsub_ps(_mm256_set1_ps(b[self.near[1]][i]), self.inv[1], self.oinv_near[1]);
+        let fy = _mm256_fmsub_ps(_mm256_set1_ps(b[self.far[1]][i]), self.inv[1], self.oinv_far[1]);
+        let nz = _mm256_fmsub_ps(_mm256_set1_ps(b[self.near[2]][i]), self.inv[2], self.oinv_near[2]);
+        let fz = _mm256_fmsub_ps(_mm256_set1_ps(b[self.far[2]][i]), self.inv[2], self.oinv_far[2]);
+        let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
+        let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, t_cull)));
+        let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
+        let hit = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far), lanes);
+        (_mm256_movemask_ps(hit) as u32, t_near)
+    }
+}
+
+/// A pending subtree of the packet traversal and the lanes that entered it.
+#[derive(Clone, Copy)]
+struct PacketEntry {
+    child: u32,
+    count: u32,
+    lanes: u32,
+    /// Entry distance of the lowest of those lanes (the visit order).
+    t: f32,
+}
+
+/// `cull_bound` of every lane.
+#[inline(always)]
+unsafe fn cull8(t_max: __m256) -> __m256 {
+    _mm256_max_ps(_mm256_mul_ps(t_max, _mm256_set1_ps(CULL_SCALE)), t_max)
+}
+
+/// Rows of no triangle (the uniform-permutation triangle test reads the packets).
+static NO_CORNERS: Corners = Corners([[0.0; 4]; 3]);
+
+/// Pushes the children of `node` that some lane of `lanes` touches onto `stack` (the
+/// farthest deepest when `ORDERED`, by the entry distance of each child's lowest lane) and
+/// returns the one to visit next.
+#[inline(always)]
+unsafe fn expand<const ORDERED: bool>(
+    node: &Node8,
+    b: &Boxes8,
+    t_min: __m256,
+    t_cull: __m256,
+    lanes: u32,
+    stack: &mut [PacketEntry],
+    sp: &mut usize,
+) -> Option<PacketEntry> {
+    let lane_vec = lane_mask(lanes);
+    let base = *sp;
+    let mut t_near = F8::default();
+    for i in 0..8 {
+        if node.count[i] == 0 && node.child[i] == 0 {
+            continue; // empty slot (node 0 is the root, never a child)
+        }
+        let (m, tn) = b.child(node, i, t_min, t_cull, lane_vec);
+        if m == 0 {
+            continue;
+        }
+        let mut e = PacketEntry { child: node.child[i], count: node.count[i], lanes: m, t: 0.0 };
+        if ORDERED {
+            // SAFETY: `F8` is 32-byte aligned.
+            _mm256_store_ps(t_near.0.as_mut_ptr(), tn);
+            e.t = t_near.0[m.trailing_zeros() as usize];
+        }
+        let mut j = *sp;
+        while ORDERED && j > base && stack[j - 1].t < e.t {
+            stack[j] = stack[j - 1];
+            j -= 1;
+        }
+        stack[j] = e;
+        *sp += 1;
+    }
+    if *sp == base {
+        return None;
+    }
+    *sp -= 1;
+    Some(stack[*sp])
+}
+
+/// Closest hits of the lanes of `rays` set in `active` in the 8-wide BVH of `blas`, with
+/// one traversal for the whole packet (8 rays x 1 child box per instruction, leaves
+/// tested 8 rays x 1 triangle): `None` (nothing done) unless the active lanes share their
+/// direction signs and watertight permutation, as coherent packets do.
+///
+/// Per lane the answer is that of the single-ray traversal: every lane tests every box
+/// with its own distances (`avx2::box8`'s arithmetic) and keeps, among the triangles it
+/// tests, the smallest `(t, id)`; boxes are culled only beyond its own closest hit
+/// (`cull_bound`), so the visit order does not change the result.
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> Option<Closest8> {
+    // Direction signs first: the cheapest test of coherence.
+    let b = Boxes8::new(rays, active as u32)?;
+    let r = setup(rays, active as u32, &EVERYWHERE);
+    let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
+    if r.active == 0 || blas.nodes8.is_empty() {
+        return Some(out);
+    }
+    let k = r.uniform?;
+    let mut stack = [PacketEntry { child: 0, count: 0, lanes: 0, t: 0.0 }; STACK8];
+    let mut sp = 0usize;
+    let mut bt = r.t_max;
+    let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+    let mut bid = _mm256_set1_epi32(NO_HIT);
+    let mut cur = PacketEntry { child: 0, count: 0, lanes: r.active, t: 0.0 };
+    loop {
+        if cur.count == 0 {
+            let node = &blas.nodes8[cur.child as usize];
+            if let Some(next) = expand::<true>(node, &b, r.t_min, cull8(bt), cur.lanes, &mut stack, &mut sp) {
+                cur = next;
+                continue;
+            }
+        } else {
+            let act = lane_mask(cur.lanes);
+            for j in cur.child as usize..(cur.child + cur.count) as usize {
+                let tri = &blas.packets[j];
+                for l in 0..4 {
+                    let id = blas.prim_ids[4 * j + l];
+                    if id == u32::MAX {
+                        continue;
+                    }
+                    let Some((edge, reject, t, u, v)) =
+                        test_tri::<true, true>(tri, &NO_CORNERS, l, &r, act, k)
+                    else {
+                        continue;
+                    };
+                    if _mm256_movemask_ps(edge) != 0 {
+                        // SAFETY (stores and loads): `F8`/`I8` are 32-byte aligned.
+                        _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
+                        _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
+                        _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
+                        _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
+                        closest_scalar(r.rays, cur.lanes, &mut out, &tri.lane(l), id as i32);
+                        bt = _mm256_load_ps(out.t.0.as_ptr());
+                        bu = _mm256_load_ps(out.u.0.as_ptr());
+                        bv = _mm256_load_ps(out.v.0.as_ptr());
+                        bid = _mm256_load_si256(out.id.0.as_ptr() as *const __m256i);
+                        continue;
+                    }
+                    let in_range = _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
+                        _mm256_cmp_ps::<_CMP_LE_OQ>(t, bt),
+                    );
+                    let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act);
+                    let idv = _mm256_set1_epi32(id as i32);
+                    let smaller_id = _mm256_castsi256_ps(_mm256_cmpgt_epi32(bid, idv));
+                    let closer =
+                        _mm256_and_ps(hit, _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(t, bt), smaller_id));
+                    bt = _mm256_blendv_ps(bt, t, closer);
+                    bu = _mm256_blendv_ps(bu, u, closer);
+                    bv = _mm256_blendv_ps(bv, v, closer);
+                    bid = _mm256_castps_si256(_mm256_blendv_ps(
+                        _mm256_castsi256_ps(bid),
+                        _mm256_castsi256_ps(idv),
+                        closer,
+                    ));
+                }
+            }
+        }
+        // Next pending subtree (its box tests cull the lanes that found closer hits).
+        if sp == 0 {
+            _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
+            _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
+            _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
+            _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
+            return Some(out);
+        }
+        sp -= 1;
+        cur = stack[sp];
+    }
+}
+
+/// Lanes of `rays` set in `active` that hit any triangle of the 8-wide BVH of `blas`
+/// with `t` in `[t_min, t_max]`, with one traversal for the packet; `None` as in
+/// [`closest_bvh`].
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> Option<u8> {
+    let b = Boxes8::new(rays, active as u32)?;
+    let r = setup(rays, active as u32, &EVERYWHERE);
+    if r.active == 0 || blas.nodes8.is_empty() {
+        return Some(0);
+    }
+    let k = r.uniform?;
+    let mut stack = [PacketEntry { child: 0, count: 0, lanes: 0, t: 0.0 }; STACK8];
+    let mut sp = 0usize;
+    let t_cull = cull8(r.t_max);
+    let mut left = r.active;
+    let mut cur = PacketEntry { child: 0, count: 0, lanes: r.active, t: 0.0 };
+    loop {
+        if cur.count == 0 {
+            let node = &blas.nodes8[cur.child as usize];
+            if let Some(next) = expand::<false>(node, &b, r.t_min, t_cull, cur.lanes, &mut stack, &mut sp) {
+                cur = next;
+                continue;
+            }
+        } else {
+            let mut act = lane_mask(cur.lanes);
+            for j in cur.child as usize..(cur.child + cur.count) as usize {
+                let tri = &blas.packets[j];
+                for l in 0..4 {
+                    if blas.prim_ids[4 * j + l] == u32::MAX {
+                        continue;
+                    }
+                    let Some((edge, reject, t, _, _)) =
+                        test_tri::<true, false>(tri, &NO_CORNERS, l, &r, act, k)
+                    else {
+                        continue;
+                    };
+                    let hit = if _mm256_movemask_ps(edge) != 0 {
+                        lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.lane(l)))
+                    } else {
+                        let in_range = _mm256_and_ps(
+                            _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
+                            _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max),
+                        );
+                        _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act)
+                    };
+                    act = _mm256_andnot_ps(hit, act);
+                    left &= !(_mm256_movemask_ps(hit) as u32);
+                }
+            }
+            if left == 0 {
+                return Some(r.active as u8);
+            }
+        }
+        loop {
+            if sp == 0 {
+                return Some((r.active & !left) as u8);
+            }
+            sp -= 1;
+            cur = stack[sp];
+            cur.lanes &= left;
+            if cur.lanes != 0 {
+                break;
+            }
+        }
+    }
 }

@@ -17,8 +17,9 @@ use crate::error::{invalid, DenoiseError};
 use crate::gbuffer::{check_color, from_planes_strided, to_planes_strided, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
-use crate::symmetric::{atrous_level, ring_fits, LevelInput};
+use crate::symmetric::{atrous_level, ring_fits, BandOut, LevelInput};
 use filtrace_core::Image;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The B3-spline generating kernel `h` (Dammertz et al. 2010, §2.2, after [Mur97]).
@@ -153,21 +154,36 @@ pub fn atrous_into(
     let g = Guides::new_strided(guide, w, h, stride)?;
     g.require_position(params.sigma_position)?;
     let (mut src, valid) = to_planes_strided(color, stride);
-    let n = stride * h;
-    let mut dst: Planes3 = [Buf::zeros(n), Buf::zeros(n), Buf::zeros(n)];
-    // Invalid (non-finite) colours are absent at every level: their pixels get values from
-    // valid neighbours but never pass them on (a block of invalid pixels would otherwise
-    // spread its placeholder values at the coarser levels).
-    let any_invalid = valid.chunks(stride.max(1)).any(|row| row[..w].contains(&0.0));
-    for i in 0..params.iterations {
-        let v = if any_invalid { Some(&valid[..]) } else { None };
-        atrous_step(&src, v, &g, params, i, &mut dst);
-        std::mem::swap(&mut src, &mut dst);
-    }
     if out.width() != w || out.height() != h || out.channels() != 3 {
         *out = Image::new(w, h, 3);
     }
-    from_planes_strided(&src, stride, out);
+    let n = stride * h;
+    // Only the padding columns need values (finite: masked lanes read them); the levels
+    // write every pixel.
+    let mut dst: Planes3 = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+    if stride > w {
+        for d in &mut dst {
+            d.par_chunks_mut(stride).for_each(|row| row[w..].fill(0.0));
+        }
+    }
+    // Invalid (non-finite) colours are absent at every level: their pixels get values from
+    // valid neighbours but never pass them on (a block of invalid pixels would otherwise
+    // spread its placeholder values at the coarser levels).
+    let any_invalid = w > 0 && valid.par_chunks(stride.max(1)).any(|row| row[..w].contains(&0.0));
+    let v = if any_invalid { Some(&valid[..]) } else { None };
+    let last = params.iterations - 1;
+    for i in 0..last {
+        atrous_step(&src, v, &g, params, i, &mut dst);
+        std::mem::swap(&mut src, &mut dst);
+    }
+    // The last level writes the interleaved output directly (when it takes the shared-weight
+    // pass: always but for rows of ~100 000 pixels).
+    if ring_fits(w, 1 << last) {
+        level_shared(&src, v, &g, params, last, BandOut::Rgb(out.data_mut()));
+    } else {
+        atrous_step(&src, v, &g, params, last, &mut dst);
+        from_planes_strided(&dst, stride, out);
+    }
     Ok(())
 }
 
@@ -200,6 +216,19 @@ pub(crate) fn atrous_step(
         debug_assert_eq!(g.stride, g.width, "the direct pass runs on unpadded planes");
         return atrous_step_direct(input, valid, g, params, i, out);
     }
+    let [o0, o1, o2] = out;
+    level_shared(input, valid, g, params, i, BandOut::Planes([o0, o1, o2]));
+}
+
+/// [`atrous_step`]'s shared-weight pass (rows that fit its ring) into `out`.
+fn level_shared(
+    input: &Planes3,
+    valid: Option<&[f32]>,
+    g: &Guides,
+    params: &AtrousParams,
+    i: u32,
+    out: BandOut,
+) {
     with_inpainted(input, valid, g, i, |input| {
         let terms = atrous_terms(params, i);
         let n = [&g.normal[0][..], &g.normal[1][..], &g.normal[2][..]];
@@ -218,8 +247,7 @@ pub(crate) fn atrous_step(
             height: g.height,
             stride: g.stride,
         };
-        let [o0, o1, o2] = out;
-        atrous_level(&a, 1 << i, terms, [o0, o1, o2]);
+        atrous_level(&a, 1 << i, terms, out);
     });
 }
 

@@ -304,6 +304,9 @@ impl Guides {
                     1.0
                 }
             });
+            // A multiply per value instead of a division (3 divisions per pixel were ~2% of
+            // À-Trous 5x3 at 1080p, perf).
+            let inv_scale = 1.0 / scale;
             let mut planes = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
             let [a, b, c] = &mut planes;
             // Background keeps its (finite) positions: it is only ever compared with background.
@@ -317,9 +320,9 @@ impl Guides {
                             let o = r * stride;
                             for (i, px) in src.chunks_exact(3).enumerate() {
                                 let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                                a[o + i] = if ok { px[0] / scale } else { 0.0 };
-                                b[o + i] = if ok { px[1] / scale } else { 0.0 };
-                                c[o + i] = if ok { px[2] / scale } else { 0.0 };
+                                a[o + i] = if ok { px[0] * inv_scale } else { 0.0 };
+                                b[o + i] = if ok { px[1] * inv_scale } else { 0.0 };
+                                c[o + i] = if ok { px[2] * inv_scale } else { 0.0 };
                             }
                             for pl in [&mut *a, &mut *b, &mut *c] {
                                 pl[o + width..o + stride].fill(0.0);

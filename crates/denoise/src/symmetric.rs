@@ -424,19 +424,96 @@ fn normalise<const B: usize>(acc: &[[f32; B]; 4], pc: &[[f32; B]; 3], out: [&mut
     }
 }
 
+/// Where a level writes its rows.
+pub(crate) enum BandOut<'a> {
+    /// Three planes of `stride` values per row (the input of the next level).
+    Planes([&'a mut [f32]; 3]),
+    /// Interleaved RGB rows of `width` pixels: the last level writes the output image
+    /// directly (each row gathered into three row buffers, then interleaved while they are
+    /// in L1), instead of writing planes and interleaving them in a separate pass.
+    Rgb(&'a mut [f32]),
+}
+
+/// The rows of one band that the gather writes: a separate [`band`] instance per kind, so
+/// that the planes' loop compiles as before (one `match` inside `band` made every level
+/// ~8% slower).
+trait Sink {
+    /// Number of rows of the band.
+    fn rows(&self) -> usize;
+    /// The three output rows of band row `r` (at least `width` values each).
+    fn row(&mut self, r: usize) -> [&mut [f32]; 3];
+    /// Called once band row `r` is written.
+    fn done(&mut self, r: usize);
+}
+
+struct PlanesSink<'a> {
+    o: [&'a mut [f32]; 3],
+    stride: usize,
+}
+
+impl Sink for PlanesSink<'_> {
+    #[inline(always)]
+    fn rows(&self) -> usize {
+        self.o[0].len() / self.stride
+    }
+    #[inline(always)]
+    fn row(&mut self, r: usize) -> [&mut [f32]; 3] {
+        let range = r * self.stride..(r + 1) * self.stride;
+        let [o0, o1, o2] = &mut self.o;
+        [&mut o0[range.clone()], &mut o1[range.clone()], &mut o2[range]]
+    }
+    #[inline(always)]
+    fn done(&mut self, _: usize) {}
+}
+
+struct RgbSink<'a> {
+    o: &'a mut [f32],
+    width: usize,
+    tmp: [Vec<f32>; 3],
+}
+
+impl Sink for RgbSink<'_> {
+    #[inline(always)]
+    fn rows(&self) -> usize {
+        self.o.len() / (3 * self.width)
+    }
+    #[inline(always)]
+    fn row(&mut self, _: usize) -> [&mut [f32]; 3] {
+        let [t0, t1, t2] = &mut self.tmp;
+        [&mut t0[..], &mut t1[..], &mut t2[..]]
+    }
+    #[inline(always)]
+    fn done(&mut self, r: usize) {
+        let w = self.width;
+        let [t0, t1, t2] = &self.tmp;
+        for (i, px) in self.o[r * 3 * w..(r + 1) * 3 * w].chunks_exact_mut(3).enumerate() {
+            px[0] = t0[i];
+            px[1] = t1[i];
+            px[2] = t2[i];
+        }
+    }
+}
+
 /// One band of output rows `y0..y0 + rows`: weight rows from `y0 - 2 step` on (the ring's
 /// start-up), gathers from `y0` on.
 #[inline(always)]
-fn band<const WC: bool, const WN: bool, const WX: bool, const V: bool, const B: usize, const F: bool>(
+fn band<
+    const WC: bool,
+    const WN: bool,
+    const WX: bool,
+    const V: bool,
+    const B: usize,
+    const F: bool,
+    O: Sink,
+>(
     a: &LevelInput,
     lv: &Level,
     y0: usize,
-    out: [&mut [f32]; 3],
+    out: &mut O,
     ring: &mut [f32],
 ) {
-    let (w, s) = (a.stride, lv.step);
-    let rows = out[0].len() / w;
-    let [o0, o1, o2] = out;
+    let s = lv.step;
+    let rows = out.rows();
     // Taps connect only rows `step` apart: the rows of each residue class `y mod step` form
     // a chain, walked on its own so that the ring holds 3 rows and the chain's next rows
     // are still in the cache (walking all rows in order needs `2 step + 1` ring rows, which
@@ -447,9 +524,9 @@ fn band<const WC: bool, const WN: bool, const WX: bool, const V: bool, const B: 
         for y in (start..y0 + rows).step_by(s) {
             weight_row::<WC, WN, WX, B, F>(a, lv, y, ring);
             if y >= y0 {
-                let r = (y - y0) * w..(y - y0 + 1) * w;
                 // (The gather writes the first `a.width` values of each output row.)
-                gather_row::<V, B, F>(a, lv, y, ring, [&mut o0[r.clone()], &mut o1[r.clone()], &mut o2[r]]);
+                gather_row::<V, B, F>(a, lv, y, ring, out.row(y - y0));
+                out.done(y - y0);
             }
         }
     }
@@ -460,14 +537,14 @@ macro_rules! band_isa {
     ($name:ident, $feat:literal, $b:literal) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $feat)]
-        unsafe fn $name<const WC: bool, const WN: bool, const WX: bool, const V: bool>(
+        unsafe fn $name<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink>(
             a: &LevelInput,
             lv: &Level,
             y0: usize,
-            out: [&mut [f32]; 3],
+            out: &mut O,
             ring: &mut [f32],
         ) {
-            band::<WC, WN, WX, V, $b, true>(a, lv, y0, out, ring)
+            band::<WC, WN, WX, V, $b, true, O>(a, lv, y0, out, ring)
         }
     };
 }
@@ -475,52 +552,52 @@ band_isa!(band_avx512, "avx512f,avx2,fma", 16);
 band_isa!(band_avx2, "avx2,fma", 8);
 
 #[inline(always)]
-fn band_v<const WC: bool, const WN: bool, const WX: bool, const V: bool>(
+fn band_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink>(
     a: &LevelInput,
     lv: &Level,
     y0: usize,
-    out: [&mut [f32]; 3],
+    out: &mut O,
     ring: &mut [f32],
     isa: Isa,
 ) {
     #[cfg(target_arch = "x86_64")]
     match isa {
         // SAFETY: `isa()` reports Avx512 / Avx2 only when those features were detected.
-        Isa::Avx512 => return unsafe { band_avx512::<WC, WN, WX, V>(a, lv, y0, out, ring) },
-        Isa::Avx2 => return unsafe { band_avx2::<WC, WN, WX, V>(a, lv, y0, out, ring) },
+        Isa::Avx512 => return unsafe { band_avx512::<WC, WN, WX, V, O>(a, lv, y0, out, ring) },
+        Isa::Avx2 => return unsafe { band_avx2::<WC, WN, WX, V, O>(a, lv, y0, out, ring) },
         Isa::Base => {}
     }
     let _ = isa;
-    band::<WC, WN, WX, V, 4, false>(a, lv, y0, out, ring)
+    band::<WC, WN, WX, V, 4, false, O>(a, lv, y0, out, ring)
 }
 
 #[inline(always)]
-fn band_t<const WC: bool, const WN: bool, const WX: bool>(
+fn band_t<const WC: bool, const WN: bool, const WX: bool, O: Sink>(
     a: &LevelInput,
     lv: &Level,
     y0: usize,
-    out: [&mut [f32]; 3],
+    out: &mut O,
     ring: &mut [f32],
     isa: Isa,
 ) {
     if a.v.is_some() {
-        band_v::<WC, WN, WX, true>(a, lv, y0, out, ring, isa)
+        band_v::<WC, WN, WX, true, O>(a, lv, y0, out, ring, isa)
     } else {
-        band_v::<WC, WN, WX, false>(a, lv, y0, out, ring, isa)
+        band_v::<WC, WN, WX, false, O>(a, lv, y0, out, ring, isa)
     }
 }
 
-fn band_any(a: &LevelInput, lv: &Level, y0: usize, out: [&mut [f32]; 3], ring: &mut [f32], isa: Isa) {
+fn band_any<O: Sink>(a: &LevelInput, lv: &Level, y0: usize, out: &mut O, ring: &mut [f32], isa: Isa) {
     let terms = (lv.inv[0] > 0.0, lv.inv[1] > 0.0, lv.inv[2] > 0.0);
     match terms {
-        (false, false, false) => band_t::<false, false, false>(a, lv, y0, out, ring, isa),
-        (true, false, false) => band_t::<true, false, false>(a, lv, y0, out, ring, isa),
-        (false, true, false) => band_t::<false, true, false>(a, lv, y0, out, ring, isa),
-        (false, false, true) => band_t::<false, false, true>(a, lv, y0, out, ring, isa),
-        (true, true, false) => band_t::<true, true, false>(a, lv, y0, out, ring, isa),
-        (true, false, true) => band_t::<true, false, true>(a, lv, y0, out, ring, isa),
-        (false, true, true) => band_t::<false, true, true>(a, lv, y0, out, ring, isa),
-        (true, true, true) => band_t::<true, true, true>(a, lv, y0, out, ring, isa),
+        (false, false, false) => band_t::<false, false, false, O>(a, lv, y0, out, ring, isa),
+        (true, false, false) => band_t::<true, false, false, O>(a, lv, y0, out, ring, isa),
+        (false, true, false) => band_t::<false, true, false, O>(a, lv, y0, out, ring, isa),
+        (false, false, true) => band_t::<false, false, true, O>(a, lv, y0, out, ring, isa),
+        (true, true, false) => band_t::<true, true, false, O>(a, lv, y0, out, ring, isa),
+        (true, false, true) => band_t::<true, false, true, O>(a, lv, y0, out, ring, isa),
+        (false, true, true) => band_t::<false, true, true, O>(a, lv, y0, out, ring, isa),
+        (true, true, true) => band_t::<true, true, true, O>(a, lv, y0, out, ring, isa),
     }
 }
 
@@ -544,7 +621,7 @@ pub(crate) fn ring_fits(width: usize, step: usize) -> bool {
 /// One À-Trous level `c_{i+1} = c_i * h_i` with step width `step` (Dammertz et al. 2010,
 /// eqs. 2-5) into `dst`. Terms set to `None` in `terms` are off; `a.x` is only read when the
 /// position term is on.
-pub(crate) fn atrous_level(a: &LevelInput, step: usize, terms: RangeTerms, dst: [&mut [f32]; 3]) {
+pub(crate) fn atrous_level(a: &LevelInput, step: usize, terms: RangeTerms, dst: BandOut) {
     let (w, h) = (a.width, a.height);
     if w == 0 || h == 0 {
         return;
@@ -558,13 +635,33 @@ pub(crate) fn atrous_level(a: &LevelInput, step: usize, terms: RangeTerms, dst: 
     let isa = isa();
     let rows = band_rows(h, step);
     let ring_len = 12 * lv.ring_rows * lv.ring_width;
-    let [d0, d1, d2] = dst;
-    let band = rows * a.stride;
-    d0.par_chunks_mut(band).zip(d1.par_chunks_mut(band)).zip(d2.par_chunks_mut(band)).enumerate().for_each(
-        |(b, ((o0, o1), o2))| {
-            // Zero padding: out-of-row neighbours of the gather read weight 0.
-            let mut ring = crate::pool::Buf::zeros(ring_len);
-            band_any(a, &lv, b * rows, [o0, o1, o2], &mut ring, isa);
-        },
-    );
+    // Zero padding of the ring: out-of-row neighbours of the gather read weight 0.
+    match dst {
+        BandOut::Planes([d0, d1, d2]) => {
+            let band = rows * a.stride;
+            d0.par_chunks_mut(band)
+                .zip(d1.par_chunks_mut(band))
+                .zip(d2.par_chunks_mut(band))
+                .enumerate()
+                .for_each(|(b, ((o0, o1), o2))| {
+                    let mut ring = crate::pool::Buf::zeros(ring_len);
+                    band_any(
+                        a,
+                        &lv,
+                        b * rows,
+                        &mut PlanesSink { o: [o0, o1, o2], stride: a.stride },
+                        &mut ring,
+                        isa,
+                    );
+                })
+        }
+        BandOut::Rgb(img) => {
+            debug_assert_eq!(img.len(), 3 * w * h);
+            img.par_chunks_mut(rows * 3 * w).enumerate().for_each(|(b, o)| {
+                let mut ring = crate::pool::Buf::zeros(ring_len);
+                let tmp = [vec![0.0f32; a.stride], vec![0.0f32; a.stride], vec![0.0f32; a.stride]];
+                band_any(a, &lv, b * rows, &mut RgbSink { o, width: w, tmp }, &mut ring, isa);
+            })
+        }
+    }
 }

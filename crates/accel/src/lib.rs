@@ -34,6 +34,19 @@
 //! Measurements against Embree 4: `docs/perf-accel.md` (1 thread, incoherent closest
 //! hits: 1.07x Embree on the 270k sphere, 0.97-1.01x on the bunny).
 //!
+//! **Closest hits do not depend on traversal order**: among hits at the same `t` the
+//! smallest `(instance, prim)` wins in every kernel (shared edges, coincident triangles),
+//! and boxes are culled only beyond the closest hit plus a `2^-12` relative slack
+//! (`wide::CULL_SCALE`), so every box holding a tied triangle is visited.
+//!
+//! **8-ray packets** ([`RayPacket`], [`SceneAccel::intersect_packet`],
+//! [`SceneAccel::occluded_packet`]; `packet.rs`) serve integrators that trace eight paths
+//! in lockstep, per lane bit-identical to the single-ray queries. With AVX2, a single
+//! flat mesh (the Cornell box) is tested 8 rays x 1 triangle per instruction, and a
+//! single BVH mesh is traversed once for the whole packet (8 rays x 1 child box) when the
+//! active lanes share direction signs and watertight permutation (camera tiles); other
+//! packets, two-level scenes and CPUs without AVX2 take one single-ray query per lane.
+//!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
 //! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and
 //! [`testmesh`] generates meshes for tests and benchmarks.

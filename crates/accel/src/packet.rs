@@ -26,7 +26,7 @@ const MIN_LANES_CLOSEST: u32 = 4;
 /// 4 lanes 0.91x and 1.09x.
 const MIN_LANES_ANY: u32 = 5;
 
-/// 8 rays, structure of arrays. Lane i is the ray (origin[*][i], dir[*][i], t_min[i], t_max[i]).
+/// 8 rays, structure of arrays. Lane i is the ray (`origin[*][i]`, `dir[*][i]`, `t_min[i]`, `t_max[i]`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RayPacket {
     pub origin: [[f32; LANES]; 3],

@@ -242,3 +242,36 @@ fn bench_render_reports_the_same_image_at_every_thread_count() {
     // Deterministic sampling: the mean colour does not depend on the thread count.
     assert_eq!(rows[0]["mean_rgb"], rows[1]["mean_rgb"]);
 }
+
+/// `--trace scalar` and `--trace lockstep` write the same EXR, byte for byte (the two
+/// tracers give bit-identical films).
+#[test]
+fn trace_modes_write_identical_images() {
+    let dir = temp_dir("trace");
+    let mut files = Vec::new();
+    for mode in ["scalar", "lockstep"] {
+        let out = dir.join(format!("{mode}.exr"));
+        let o = run(bin()
+            .args([
+                "render",
+                "cornell",
+                "--res",
+                "21x13",
+                "--spp",
+                "3",
+                "--threads",
+                "2",
+                "--json",
+                "--trace",
+                mode,
+            ])
+            .arg("--out")
+            .arg(&out));
+        assert!(o.status.success(), "render --trace {mode} failed: {}", stderr(&o));
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files[0] == files[1], "scalar and lockstep EXRs differ");
+    let o = run(bin().args(["render", "cornell", "--trace", "simd"]));
+    assert!(!o.status.success() && stderr(&o).contains("simd"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}

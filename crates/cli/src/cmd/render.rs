@@ -62,6 +62,27 @@ pub struct CommonArgs {
     /// PNG with a filmic curve instead of the plain sRGB clamp.
     #[arg(long)]
     pub filmic: bool,
+    /// How the path tracer walks its paths: one at a time (`scalar`) or 8 in SIMD lockstep
+    /// (`lockstep`). The image is bit-identical; only the speed differs. Default: the
+    /// renderer's default.
+    #[arg(long, value_enum)]
+    pub trace: Option<TraceArg>,
+}
+
+/// `--trace` values (filtrace_render::TraceMode).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TraceArg {
+    Scalar,
+    Lockstep,
+}
+
+impl TraceArg {
+    pub fn mode(self) -> filtrace_render::TraceMode {
+        match self {
+            TraceArg::Scalar => filtrace_render::TraceMode::Scalar,
+            TraceArg::Lockstep => filtrace_render::TraceMode::Lockstep,
+        }
+    }
 }
 
 /// `filtrace render` options.
@@ -326,8 +347,11 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
 
     let pool = c.thread_pool()?;
     let threads = pool.current_num_threads();
-    let renderer =
+    let mut renderer =
         pool.install(|| Renderer::new(scene, settings.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(t) = c.trace {
+        renderer = renderer.with_trace_mode(t.mode());
+    }
 
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {}", c.scene_name()));

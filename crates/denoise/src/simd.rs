@@ -79,11 +79,13 @@ pub fn scaled_exp_neg<const F: bool>(x: f32, log2_h: f32) -> f32 {
     let f = t - r;
     let i = (tm.to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
     let scale = f32::from_bits(((i + 127) << 23) as u32);
-    let p = madd::<F>(f, 1.540_353e-4, 0.001_333_355);
-    let p = madd::<F>(f, p, 0.009_618_129);
-    let p = madd::<F>(f, p, 0.055_504_11);
-    let p = madd::<F>(f, p, 0.240_226_5);
-    let p = madd::<F>(f, p, std::f32::consts::LN_2);
+    // 2^f on [-1/2, 1/2], degree 5, fitted to the relative error (Lawson iterations): 1.9e-7
+    // relative in f32, one multiply-add less than the degree-6 polynomial of `exp_neg_g`
+    // (12 evaluations per pixel and À-Trous level).
+    let p = madd::<F>(f, 0.001_326_47, 0.009_671_51);
+    let p = madd::<F>(f, p, 0.055_507_34);
+    let p = madd::<F>(f, p, 0.240_222_42);
+    let p = madd::<F>(f, p, 0.693_146_98);
     madd::<F>(f, p, 1.0) * scale
 }
 

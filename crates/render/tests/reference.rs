@@ -10,7 +10,7 @@ mod common;
 
 use common::*;
 use filtrace_core::Image;
-use filtrace_render::{RenderSettings, Renderer};
+use filtrace_render::{RenderSettings, Renderer, TraceMode};
 use filtrace_scene::builtin;
 
 fn reference() -> Option<Image> {
@@ -52,7 +52,10 @@ fn relative_mse(x: &Image, r: &Image) -> f64 {
 
 fn render_cornell(size: u32, spp: u32) -> filtrace_render::Aovs {
     let settings = RenderSettings { width: size, height: size, spp, max_depth: 8, seed: 0 };
-    let r = Renderer::new(builtin("cornell").unwrap(), settings).unwrap();
+    // The lockstep tracer: its films equal the scalar tracer's bit for bit (tests/lockstep.rs),
+    // so this checks both against Mitsuba.
+    let r =
+        Renderer::new(builtin("cornell").unwrap(), settings).unwrap().with_trace_mode(TraceMode::Lockstep);
     let film = render(&r);
     assert_eq!(film.dropped_samples(), 0);
     film.aovs()

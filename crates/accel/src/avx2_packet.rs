@@ -1,19 +1,30 @@
-//! Eight-ray packet kernels with AVX2 for flat bottom levels (meshes of at most
-//! [`crate::BuildParams::max_flat_triangles`] triangles, the Cornell box): every triangle
-//! is tested against all active rays at once, one ray per lane (8 rays x 1 triangle per
-//! instruction), instead of one ray against two 4-triangle packets.
+//! Eight-ray packet kernels with AVX2 ([`crate::SceneAccel::intersect_packet`],
+//! [`crate::SceneAccel::occluded_packet`] on a scene of one object).
+//!
+//! - **Flat bottom levels** (at most [`crate::BuildParams::max_flat_triangles`]
+//!   triangles, the Cornell box): every triangle is tested against all active rays at
+//!   once, one ray per lane (8 rays x 1 triangle per instruction), instead of one ray
+//!   against two 4-triangle packets.
+//! - **8-wide BVHs**, for coherent packets (all active lanes with the same direction signs
+//!   and watertight permutation: camera tiles): one traversal for the packet, each child
+//!   box tested against the 8 rays (8 rays x 1 box), leaves as for flat meshes. Other
+//!   packets are left to the caller (one single-ray query per lane).
 //!
 //! Per lane the arithmetic is that of the single-ray kernels, operation for operation
-//! (the watertight test of Woop et al. 2013 as in `avx2::test8v`, without fused
-//! multiply-adds), so each lane's hit is bit-identical to [`crate::SceneAccel::intersect`]:
-//! the rays' permutation `kx, ky, kz` may differ per lane, so each triangle corner is
-//! broadcast and its permuted components picked per lane with two blends (skipped when all
-//! active lanes share the permutation, the common case for camera and shadow rays); a lane
-//! with an edge function exactly zero takes the scalar test with its `f64` fallback, as the
-//! single-ray kernels do; ties in `t` go to the smallest primitive id.
+//! (ray validity, bounds check, the watertight permutation and shear, the watertight test
+//! of Woop et al. 2013 as in `avx2::test8v` without fused multiply-adds, the fused slab
+//! test of `avx2::box8`), so each lane's hit is bit-identical to
+//! [`crate::SceneAccel::intersect`]. The rays' permutation `kx, ky, kz` may differ per
+//! lane: each triangle corner is then read as a row `[x, y, z, x]` and its permuted
+//! components picked per lane with one shuffle each (plain broadcasts when all active
+//! lanes share the permutation). A lane with an edge function exactly zero takes the
+//! scalar test with its `f64` fallback, as the single-ray kernels do; ties in `t` go to
+//! the smallest primitive id; boxes are culled per lane beyond its own closest hit, so the
+//! visit order (which differs from the single-ray traversal) does not change the result.
 //!
 //! As in `avx2.rs`, the kernels are `#[target_feature(enable = "avx2,fma")]` functions that
-//! callers reach only when [`crate::Simd::Avx2`] is available.
+//! callers reach only when [`crate::Simd::Avx2`] is available; helpers are
+//! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
 use crate::packet::{RayPacket, LANES};
 use crate::sah::MAX_DEPTH;

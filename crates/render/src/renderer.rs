@@ -132,13 +132,15 @@ pub enum IntegratorKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TraceMode {
     /// Eight adjacent pixels of a row in lockstep ([`integrator::lockstep`]), AVX2 lane code
-    /// when the CPU has AVX2 and FMA, else the portable lane code.
+    /// when the CPU has AVX2 and FMA, else the portable lane code. The default: with the
+    /// accel crate's packet queries it is ~20% faster per CPU second than [`TraceMode::Scalar`]
+    /// on the Cornell box (docs/perf-render.md).
+    #[default]
     Lockstep,
     /// [`TraceMode::Lockstep`] with the portable lane code even on AVX2 CPUs (for tests and
     /// comparisons).
     LockstepPortable,
     /// One path at a time ([`integrator::path::li`]), the reference.
-    #[default]
     Scalar,
 }
 

@@ -298,12 +298,13 @@ fn sample_cosine_hemisphere8(ux: F8, uy: F8) -> V8 {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum RayQueries {
     /// One single-ray query per active lane (`SceneAccel::intersect_packet_lanes`).
-    /// Default: on the Cornell box at 5168423 the AVX2 packet kernels for flat meshes took
-    /// 3.6x the CPU time of the whole render (throughput bench, 0.28 vs 1.0 M samples per
-    /// CPU s; cachegrind 5.1 G vs 2.45 G instructions at 1 spp).
-    #[default]
     PerLane,
     /// `SceneAccel::intersect_packet` / `occluded_packet` (the accel crate's packet kernels).
+    /// Default since accel `bdd40e2`/`250de66` (BVH packet traversal, per-lane below 4-5
+    /// active lanes): Cornell 512², 8 spp, 1 thread, 3 interleaved runs: 1.32-1.37 M
+    /// samples per CPU s vs 1.08-1.11 per lane (and 1.10-1.12 for the scalar tracer). With
+    /// the first flat-mesh packet kernels (`5168423`) packets were 3.6x slower.
+    #[default]
     Packet,
 }
 

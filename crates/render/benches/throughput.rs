@@ -1,7 +1,7 @@
 //! Headline throughput: samples per second on the built-in Cornell box at 512 x 512,
 //! max depth 8, on local rayon pools of 1 and 2 threads (build time excluded).
 //!
-//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...] [scalar|lockstep|portable] [packets] [lanes]]`
+//! `cargo bench -p filtrace-render --bench throughput [-- SPP [THREADS...] [scalar|lockstep|portable] [packets|perlane] [lanes]]`
 //! (default 16 spp, threads 1 2, the renderer's default trace mode). Prints one line per
 //! thread count and a JSON line; `lanes` also prints the lockstep lane utilisation.
 
@@ -28,6 +28,9 @@ fn main() {
     }
     if has("packets") {
         renderer = renderer.with_ray_queries(RayQueries::Packet);
+    }
+    if has("perlane") {
+        renderer = renderer.with_ray_queries(RayQueries::PerLane);
     }
     println!(
         "cornell 512x512 spp {spp} max_depth 8, trace mode {:?}, ray queries {:?}, build {:.3} ms",

@@ -20,7 +20,7 @@
 use crate::sah::MAX_DEPTH;
 use crate::tri4::{prefetch_packets, test4_scalar, Tri4};
 use crate::triangle::WatertightRay;
-use crate::wide::{cull_bound, prefetch, Entry, Leaves, Node8, FAR_SCALE};
+use crate::wide::{cull_bound, prefetch, push_children, Entry, Leaves, Node8, FAR_SCALE};
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
@@ -150,53 +150,7 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
                         leaves.prefetch(node.child[i], node.count[i]);
                     }
                 }
-                let first = mask.trailing_zeros() as usize;
-                let rest = mask & (mask - 1);
-                if rest == 0 {
-                    cur = e(first);
-                    continue;
-                }
-                if !ORDERED {
-                    let mut bits = rest;
-                    while bits != 0 {
-                        let i = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        stack[sp] = MaybeUninit::new(e(i));
-                        sp += 1;
-                    }
-                    cur = e(first);
-                    continue;
-                }
-                // Two hits (the most common case): push the farther, visit the nearer.
-                if rest & (rest - 1) == 0 {
-                    let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
-                    let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
-                    stack[sp] = MaybeUninit::new(far);
-                    sp += 1;
-                    cur = near;
-                    continue;
-                }
-                // Three to eight hits: insertion-sort them straight onto the stack by
-                // entry distance, farthest deepest, and continue with the nearest.
-                debug_assert!(sp + 8 <= STACK8, "BVH deeper than MAX_DEPTH");
-                let base = sp;
-                let mut bits = mask;
-                while bits != 0 {
-                    let i = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let h = e(i);
-                    let mut j = sp;
-                    // SAFETY: entries `base..sp` were written in this loop.
-                    while j > base && unsafe { stack[j - 1].assume_init() }.t < h.t {
-                        stack[j] = stack[j - 1];
-                        j -= 1;
-                    }
-                    stack[j] = MaybeUninit::new(h);
-                    sp += 1;
-                }
-                sp -= 1;
-                // SAFETY: written just above.
-                cur = unsafe { stack[sp].assume_init() };
+                cur = push_children::<ORDERED>(mask, e, &mut stack, &mut sp);
                 continue;
             }
         } else if leaves.visit(cur.child, cur.count, t_max) {

@@ -296,6 +296,61 @@ impl<F: FnMut(u32, u32, &mut f32) -> bool> Leaves for F {
     }
 }
 
+/// The hit children `mask` (non-zero) of a node, `e(i)` the entry of child `i`: pushes
+/// all but one onto `stack` and returns the one to visit next. `ORDERED` (closest hits):
+/// near-first, the farther entries deepest (two hits, the most common case: one compare;
+/// more: insertion-sorted straight onto the stack); else in slot order. Shared by the
+/// 4-wide and 8-wide traversals.
+#[inline(always)]
+pub(crate) fn push_children<const ORDERED: bool>(
+    mask: u32,
+    e: impl Fn(usize) -> Entry,
+    stack: &mut [MaybeUninit<Entry>],
+    sp: &mut usize,
+) -> Entry {
+    let first = mask.trailing_zeros() as usize;
+    let rest = mask & (mask - 1);
+    if rest == 0 {
+        return e(first);
+    }
+    if !ORDERED {
+        let mut bits = rest;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            stack[*sp] = MaybeUninit::new(e(i));
+            *sp += 1;
+        }
+        return e(first);
+    }
+    if rest & (rest - 1) == 0 {
+        let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
+        let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
+        stack[*sp] = MaybeUninit::new(far);
+        *sp += 1;
+        return near;
+    }
+    debug_assert!(*sp + mask.count_ones() as usize <= stack.len(), "BVH deeper than MAX_DEPTH");
+    let base = *sp;
+    let mut bits = mask;
+    while bits != 0 {
+        let i = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let h = e(i);
+        let mut j = *sp;
+        // SAFETY: entries `base..sp` were written in this loop.
+        while j > base && unsafe { stack[j - 1].assume_init() }.t < h.t {
+            stack[j] = stack[j - 1];
+            j -= 1;
+        }
+        stack[j] = MaybeUninit::new(h);
+        *sp += 1;
+    }
+    *sp -= 1;
+    // SAFETY: written just above.
+    unsafe { stack[*sp].assume_init() }
+}
+
 /// Visits every leaf whose box the ray `[t_min, *t_max]` touches, calling
 /// `leaves.visit(first, count, t_max)`; returns `true` when a visit asked to stop.
 /// `ORDERED`: visit hit children near-first (closest hit); any-hit queries skip the sort.
@@ -318,8 +373,6 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
             let node = &nodes[cur.child as usize];
             let (mask, t_near) = box4(node, r, t_min, *t_max);
             if mask != 0 {
-                let first = mask.trailing_zeros() as usize;
-                let rest = mask & (mask - 1);
                 let e = |i: usize| Entry { child: node.child[i], count: node.count[i], t: t_near[i] };
                 // Start fetching every child to be visited while the order is worked out.
                 let mut bits = mask;
@@ -332,52 +385,7 @@ pub(crate) fn traverse<L: Leaves, const ORDERED: bool>(
                         leaves.prefetch(node.child[i], node.count[i]);
                     }
                 }
-                if rest == 0 {
-                    cur = e(first);
-                    continue;
-                }
-                if !ORDERED {
-                    let mut bits = rest;
-                    while bits != 0 {
-                        let i = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        stack[sp] = MaybeUninit::new(e(i));
-                        sp += 1;
-                    }
-                    cur = e(first);
-                    continue;
-                }
-                // Two hits (the most common case): push the farther, visit the nearer.
-                if rest & (rest - 1) == 0 {
-                    let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
-                    let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
-                    stack[sp] = MaybeUninit::new(far);
-                    sp += 1;
-                    cur = near;
-                    continue;
-                }
-                // Sort the (3 or 4) hit children by entry distance, farthest first.
-                let mut hits = [e(first); 4];
-                let mut k = 1;
-                let mut bits = rest;
-                while bits != 0 {
-                    let i = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let h = e(i);
-                    let mut j = k;
-                    while j > 0 && hits[j - 1].t < h.t {
-                        hits[j] = hits[j - 1];
-                        j -= 1;
-                    }
-                    hits[j] = h;
-                    k += 1;
-                }
-                debug_assert!(sp + k - 1 <= STACK, "BVH deeper than MAX_DEPTH");
-                for h in &hits[..k - 1] {
-                    stack[sp] = MaybeUninit::new(*h);
-                    sp += 1;
-                }
-                cur = hits[k - 1];
+                cur = push_children::<ORDERED>(mask, e, &mut stack, &mut sp);
                 continue;
             }
         } else if leaves.visit(cur.child, cur.count, t_max) {

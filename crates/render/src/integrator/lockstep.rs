@@ -28,7 +28,7 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{and, bits, from_bits, not, select, Sampler8, F8, LANES, M8, V8};
+use super::lanes::{and, bits, from_bits, not, or, per_lane, select, Sampler8, F8, LANES, M8, V8};
 use super::path::visible_surface;
 use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
@@ -222,7 +222,7 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket) -> (Surf8, M8) {
             s.set_lane(i, si);
         }
     }
-    let ok = std::array::from_fn(|i| ok_plain[i] || scalar_ok[i]);
+    let ok = or(ok_plain, scalar_ok);
     (s, ok)
 }
 
@@ -257,7 +257,7 @@ fn power_heuristic8(f_pdf: F8, g_pdf: F8) -> F8 {
     let f2 = f * f;
     let denom = f2 + g * g;
     let w = select(denom.gt(F8::splat(0.0)), f2 / denom, F8::splat(0.0));
-    F8(std::array::from_fn(|i| if f2.0[i].is_infinite() { 1.0 } else { w.0[i] }))
+    select(f2.is_infinite(), F8::splat(1.0), w)
 }
 
 /// `sin_cos_quarter_pi` in lanes (same Horner polynomials).
@@ -358,7 +358,7 @@ pub fn trace_group(
     // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
     let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
     let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
-    let px = F8(x.map(|v| v as f32));
+    let px = F8(per_lane(|i| x[i] as f32));
     let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
     let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
     let dir =
@@ -519,13 +519,11 @@ pub fn trace_group(
             let cos_l = -a_n.dot(wi);
             let c = cos_l.abs();
             let pdf_a = dist2 / (c * a_area);
-            let ok: M8 = std::array::from_fn(|i| {
-                dist2.0[i] > 0.0
-                    && !(!a_two[i] && cos_l.0[i] <= 0.0)
-                    && !(c.0[i] <= 0.0)
-                    && pdf_a.0[i] > 0.0
-                    && pdf_a.0[i].is_finite()
-            });
+            // Lane masks combined with `&` (a `&&` chain in a closure was left out of line,
+            // compiled without AVX, 3% of the profile).
+            let front = not(and(not(a_two), cos_l.le(zero)));
+            let ok =
+                and(and(dist2.gt(zero), front), and(not(c.le(zero)), and(pdf_a.gt(zero), pdf_a.is_finite())));
             let ok = and(area, ok);
             let pdf = pmf * pdf_a;
             for i in lanes_of(area) {
@@ -536,9 +534,7 @@ pub fn trace_group(
             ls_dist = select(area, dist, ls_dist);
         }
         let p_l = ls_pdf;
-        let usable: M8 = std::array::from_fn(|i| {
-            ls_ok[i] && !(p_l.0[i].is_nan() || p_l.0[i] <= 0.0) && ls_li.lane(i) != Rgb::ZERO
-        });
+        let usable = and(and(ls_ok, not(or(p_l.is_nan(), p_l.le(zero)))), not(ls_li.is_zero()));
         let wi_l = to_local(&fx, &fy, &n, ls_wi);
         // Lambert: f = rho / pi above both horizons; times |cos|.
         let above = and(not(wo.z.le(zero)), not(wi_l.z.le(zero)));
@@ -553,9 +549,7 @@ pub fn trace_group(
         let shadow = and(usable, not(f.is_zero()));
         let s_org = si.offset_origin(ls_wi);
         let far =
-            F8(ls_dist
-                .0
-                .map(|d| if d.is_finite() { d * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY }));
+            ls_dist.map(|d| if d.is_finite() { d * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY });
         let srays = RayPacket {
             origin: [s_org.x.0, s_org.y.0, s_org.z.0],
             dir: [ls_wi.x.0, ls_wi.y.0, ls_wi.z.0],

@@ -160,14 +160,13 @@ fn lanes_of(m: M8) -> impl Iterator<Item = usize> {
 /// with a usable hit (a hit on a degenerate triangle counts as a miss, as in the scalar
 /// `PathContext::intersect`).
 #[inline(always)]
-fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket) -> (Surf8, M8) {
+fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8 {
     let hit = from_bits(hits.mask);
     let mut p0 = V8::default();
     let mut p1 = V8::default();
     let mut p2 = V8::default();
     let mut n = V8::default();
     let mut scale = F8::default();
-    let mut s = Surf8::default();
     let mut plain = [false; LANES];
     let mut scalar_ok = [false; LANES];
     let mut scalar = [None; LANES];
@@ -222,8 +221,7 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket) -> (Surf8, M8) {
             s.set_lane(i, si);
         }
     }
-    let ok = or(ok_plain, scalar_ok);
-    (s, ok)
+    or(ok_plain, scalar_ok)
 }
 
 /// `Frame::from_z(n)` in lanes (Duff et al. 2017), as `(x, y)` (`z = n`).
@@ -370,7 +368,8 @@ pub fn trace_group(
         t_max: [f32::INFINITY; LANES],
     };
     let hits = lc.intersect(&rays, lanes);
-    let (mut si, hit) = from_hits(ctx, &dir, &hits);
+    let mut si = Surf8::default();
+    let hit = from_hits(ctx, &dir, &hits, &mut si);
     let want_surface = index == 0;
     for i in lanes_of(lanes) {
         if hit[i] {
@@ -615,7 +614,8 @@ pub fn trace_group(
         rays.origin = [org.x.0, org.y.0, org.z.0];
         rays.dir = [wi.x.0, wi.y.0, wi.z.0];
         let hits = lc.intersect(&rays, act);
-        let (next, found) = from_hits(ctx, &wi, &hits);
+        // The records of the new vertices replace the old ones in place (no 1 kB copy).
+        let found = from_hits(ctx, &wi, &hits, &mut si);
         let missed = and(act, not(found));
         if ctx.lights.has_environment() {
             for i in lanes_of(missed) {
@@ -637,7 +637,6 @@ pub fn trace_group(
             }
         }
         act = and(act, found);
-        si = next;
         if !act.iter().any(|&a| a) {
             break;
         }

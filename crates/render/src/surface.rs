@@ -165,6 +165,16 @@ impl SceneGeometry {
         }
     }
 
+    /// The reflectance of `material` when its BSDF is an untextured Lambert (the stored
+    /// [`SurfaceBsdf::Diffuse`], so the same value `bsdf` gives).
+    #[inline]
+    pub(crate) fn constant_diffuse(&self, material: MaterialId) -> Option<filtrace_core::Rgb> {
+        match self.constant_bsdfs.get(material as usize) {
+            Some(Some(SurfaceBsdf::Diffuse(d))) => Some(d.reflectance),
+            _ => None,
+        }
+    }
+
     /// Material of triangle `prim` of instance `instance` (overrides applied).
     #[inline]
     pub fn material(&self, instance: u32, prim: u32) -> MaterialId {

@@ -439,6 +439,12 @@ pub fn trace_group(
         let mut lobe = [false; LANES];
         let mut rho = V8::default();
         for i in lanes_of(act) {
+            // Untextured Lambert (most surfaces): its reflectance only, no BSDF record.
+            if let Some(r) = ctx.geometry.constant_diffuse(si.material[i]) {
+                diffuse[i] = true;
+                rho.set_lane(i, r);
+                continue;
+            }
             bsdf[i] = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
             match &bsdf[i] {
                 SurfaceBsdf::Diffuse(d) => {

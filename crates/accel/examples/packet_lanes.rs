@@ -72,6 +72,27 @@ fn main() -> Result<(), String> {
         ("shadow any", packets_of(&shadow_rays(&scene, rays, 7)), false),
     ];
     println!("scene `{scene_arg}`, {:?} kernels, 1 thread; CPU ns per active ray", accel.simd());
+    // Coherence: camera tiles of 4x2 rays whose pixels lie `stride` pixels apart (1024^2
+    // image), all 8 lanes active; the packet query takes the packet traversal when the
+    // lanes share direction signs and permutation.
+    let (w, h) = (1024usize, 1024usize);
+    let cam = primary_rays(&scene, w, h);
+    println!("| tile pixel stride | packet | single rays | single / packet |");
+    println!("|---:|---:|---:|---:|");
+    for stride in [1usize, 2, 4, 8, 16, 32, 64] {
+        let mut tiles = Vec::new();
+        for ty in (0..h - stride).step_by(2 * stride.min(8)) {
+            for tx in (0..w - 3 * stride).step_by(4 * stride.min(8)) {
+                let lanes: Vec<_> =
+                    (0..LANES).map(|i| cam[(ty + stride * (i / 4)) * w + tx + stride * (i % 4)]).collect();
+                tiles.push(RayPacket::from_rays(&lanes));
+            }
+        }
+        tiles.truncate(rays / LANES);
+        let packet = ns_per_ray(&tiles, |p, a| accel.intersect_packet(p, a).mask as u32);
+        let single = ns_per_ray(&tiles, |p, a| accel.intersect_packet_lanes(p, a).mask as u32);
+        println!("| {stride} | {packet:.1} | {single:.1} | {:.2} |", single / packet);
+    }
     println!("| rays | active lanes | packet | single rays | single / packet |");
     println!("|---|---:|---:|---:|---:|");
     for (name, packets, closest) in &sets {

@@ -6,7 +6,8 @@
 //!   once, one ray per lane (8 rays x 1 triangle per instruction), instead of one ray
 //!   against two 4-triangle packets.
 //! - **8-wide BVHs**, for coherent packets (all active lanes with the same direction signs
-//!   and watertight permutation: camera tiles): one traversal for the packet, each child
+//!   and watertight permutation, directions within [`MAX_SPREAD`]: camera tiles): one
+//!   traversal for the packet, each child
 //!   box tested against the 8 rays (8 rays x 1 box), leaves as for flat meshes. Other
 //!   packets are left to the caller (one single-ray query per lane).
 //!

@@ -44,7 +44,8 @@
 //! in lockstep, per lane bit-identical to the single-ray queries. With AVX2, a single
 //! flat mesh (the Cornell box) is tested 8 rays x 1 triangle per instruction, and a
 //! single BVH mesh is traversed once for the whole packet (8 rays x 1 child box) when the
-//! active lanes share direction signs and watertight permutation (camera tiles); other
+//! active lanes share direction signs and watertight permutation and their directions
+//! lie close together (camera tiles); other
 //! packets, two-level scenes and CPUs without AVX2 take one single-ray query per lane.
 //!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the

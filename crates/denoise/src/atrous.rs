@@ -14,7 +14,7 @@
 //! plain À-Trous transform), which reproduces the paper's Table 2 and Figure 4.
 
 use crate::error::{invalid, DenoiseError};
-use crate::gbuffer::{check_color, from_planes_strided, to_planes_strided, GBuffer, Guides, Planes3};
+use crate::gbuffer::{check_color, from_planes_strided, to_planes_valid, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
 use crate::symmetric::{atrous_level, ring_fits, BandOut, LevelInput};
@@ -153,7 +153,7 @@ pub fn atrous_into(
     // À-Trous reads depth only as the position when no position buffer is given.
     let g = Guides::new_strided(guide, w, h, stride)?;
     g.require_position(params.sigma_position)?;
-    let (mut src, valid) = to_planes_strided(color, stride);
+    let (mut src, valid) = to_planes_valid(color, stride);
     if out.width() != w || out.height() != h || out.channels() != 3 {
         *out = Image::new(w, h, 3);
     }
@@ -168,9 +168,9 @@ pub fn atrous_into(
     }
     // Invalid (non-finite) colours are absent at every level: their pixels get values from
     // valid neighbours but never pass them on (a block of invalid pixels would otherwise
-    // spread its placeholder values at the coarser levels).
-    let any_invalid = w > 0 && valid.par_chunks(stride.max(1)).any(|row| row[..w].contains(&0.0));
-    let v = if any_invalid { Some(&valid[..]) } else { None };
+    // spread its placeholder values at the coarser levels). The validity plane exists only
+    // when some colour is invalid.
+    let v = valid.as_deref().map(|v| &v[..]);
     let last = params.iterations - 1;
     for i in 0..last {
         atrous_step(&src, v, &g, params, i, &mut dst);

@@ -155,6 +155,50 @@ pub(crate) fn to_planes_strided(im: &Image, stride: usize) -> (Planes3, Buf) {
     (p, valid)
 }
 
+/// [`to_planes_strided`] without the validity plane when every value is finite (the usual
+/// case: `None`, and 8 MB less to write and scan at 1080p); when some value is not, the
+/// planes and the validity plane of [`to_planes_strided`].
+pub(crate) fn to_planes_valid(im: &Image, stride: usize) -> (Planes3, Option<Buf>) {
+    let (w, h) = (im.width(), im.height());
+    debug_assert!(stride >= w);
+    let n = stride * h;
+    let mut p = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+    if n == 0 {
+        return (p, None);
+    }
+    let [p0, p1, p2] = &mut p;
+    let rows = (PAR_CHUNK / w.max(1)).max(1);
+    let any_invalid = p0
+        .par_chunks_mut(rows * stride)
+        .zip(p1.par_chunks_mut(rows * stride))
+        .zip(p2.par_chunks_mut(rows * stride))
+        .zip(im.data().par_chunks(3 * w * rows))
+        .map(|(((a, b), c), src)| {
+            let mut bad = false;
+            for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                let o = r * stride;
+                for (i, px) in src.chunks_exact(3).enumerate() {
+                    let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+                    bad |= !ok;
+                    a[o + i] = if ok { px[0] } else { 0.0 };
+                    b[o + i] = if ok { px[1] } else { 0.0 };
+                    c[o + i] = if ok { px[2] } else { 0.0 };
+                }
+                for pl in [&mut *a, &mut *b, &mut *c] {
+                    pl[o + w..o + stride].fill(0.0);
+                }
+            }
+            bad
+        })
+        .reduce(|| false, |a, b| a || b);
+    if any_invalid {
+        let (p, valid) = to_planes_strided(im, stride);
+        (p, Some(valid))
+    } else {
+        (p, None)
+    }
+}
+
 /// Interleaves three planes into `out` (3 channels, same pixel count).
 pub(crate) fn from_planes(p: &Planes3, out: &mut Image) {
     from_planes_strided(p, out.width(), out)

@@ -262,6 +262,30 @@ fn guided_is_identical_for_any_thread_count_and_build() {
     }
 }
 
+/// The conversion that skips the validity plane gives the same planes, and the validity
+/// plane exactly when some colour is not finite.
+#[test]
+fn to_planes_valid_matches_to_planes_strided() {
+    use crate::gbuffer::{to_planes_strided, to_planes_valid};
+    let mut rng = Rng::new(14);
+    let (w, h, stride) = (37, 29, 48);
+    let mut color = random_color(w, h, &mut rng);
+    for bad in [None, Some(f32::NAN), Some(f32::NEG_INFINITY)] {
+        if let Some(v) = bad {
+            color.pixel_mut(36, 28)[2] = v;
+        }
+        let (p, valid) = to_planes_valid(&color, stride);
+        let (q, want) = to_planes_strided(&color, stride);
+        for c in 0..3 {
+            assert!(p[c][..] == q[c][..], "{bad:?}: plane {c}");
+        }
+        assert_eq!(valid.is_some(), bad.is_some());
+        if let Some(v) = valid {
+            assert!(v[..] == want[..]);
+        }
+    }
+}
+
 #[test]
 fn bilateral_matches_naive() {
     let mut rng = Rng::new(2);

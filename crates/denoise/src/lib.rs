@@ -33,6 +33,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod atrous;
+pub mod bench_input;
 pub mod bilateral;
 pub mod demodulate;
 pub mod error;

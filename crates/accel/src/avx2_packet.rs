@@ -62,6 +62,88 @@ pub(crate) struct Closest8 {
     pub id: I8,
 }
 
+/// The running closest hits of a packet, in registers: what [`Closest8`] holds.
+#[derive(Clone, Copy)]
+struct Best8 {
+    t: __m256,
+    u: __m256,
+    v: __m256,
+    id: __m256i,
+}
+
+impl Best8 {
+    /// No hits yet, lanes searching up to `t_max`.
+    #[inline(always)]
+    unsafe fn new(t_max: __m256) -> Self {
+        Best8 { t: t_max, u: _mm256_setzero_ps(), v: _mm256_setzero_ps(), id: _mm256_set1_epi32(NO_HIT) }
+    }
+
+    #[inline(always)]
+    unsafe fn store(&self, out: &mut Closest8) {
+        // SAFETY: `F8`/`I8` are 32-byte aligned.
+        _mm256_store_ps(out.t.0.as_mut_ptr(), self.t);
+        _mm256_store_ps(out.u.0.as_mut_ptr(), self.u);
+        _mm256_store_ps(out.v.0.as_mut_ptr(), self.v);
+        _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, self.id);
+    }
+
+    #[inline(always)]
+    unsafe fn load(out: &Closest8) -> Self {
+        // SAFETY: as in `store`.
+        Best8 {
+            t: _mm256_load_ps(out.t.0.as_ptr()),
+            u: _mm256_load_ps(out.u.0.as_ptr()),
+            v: _mm256_load_ps(out.v.0.as_ptr()),
+            id: _mm256_load_si256(out.id.0.as_ptr() as *const __m256i),
+        }
+    }
+
+    /// Takes the hits `(t, u, v)` of triangle `id` in the lanes `act` not rejected and in
+    /// `[t_min, self.t]`: closer means `t < self.t`, or `t == self.t` and a smaller id.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn update(
+        &mut self,
+        t: __m256,
+        u: __m256,
+        v: __m256,
+        reject: __m256,
+        t_min: __m256,
+        act: __m256,
+        id: u32,
+    ) {
+        let in_range =
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, t_min), _mm256_cmp_ps::<_CMP_LE_OQ>(t, self.t));
+        let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act);
+        let idv = _mm256_set1_epi32(id as i32);
+        let smaller_id = _mm256_castsi256_ps(_mm256_cmpgt_epi32(self.id, idv));
+        let closer = _mm256_and_ps(hit, _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(t, self.t), smaller_id));
+        self.t = _mm256_blendv_ps(self.t, t, closer);
+        self.u = _mm256_blendv_ps(self.u, u, closer);
+        self.v = _mm256_blendv_ps(self.v, v, closer);
+        self.id = _mm256_castps_si256(_mm256_blendv_ps(
+            _mm256_castsi256_ps(self.id),
+            _mm256_castsi256_ps(idv),
+            closer,
+        ));
+    }
+
+    /// Rare: some lane lies exactly on an edge of `tri`; the scalar test for the lanes `active`.
+    #[inline(always)]
+    unsafe fn update_scalar(
+        &mut self,
+        rays: &RayPacket,
+        active: u32,
+        out: &mut Closest8,
+        tri: &Tri,
+        id: u32,
+    ) {
+        self.store(out);
+        closest_scalar(rays, active, out, tri, id as i32);
+        *self = Best8::load(out);
+    }
+}
+
 /// The rays of a packet prepared for the watertight test, in object space, in registers.
 #[derive(Clone, Copy)]
 struct Regs<'a> {
@@ -342,9 +424,7 @@ pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> 
 #[inline]
 unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3]) -> Closest8 {
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
-    let mut bt = r.t_max;
-    let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-    let mut bid = _mm256_set1_epi32(NO_HIT);
+    let mut best = Best8::new(r.t_max);
     for (j, tri) in blas.packets.iter().enumerate() {
         for l in 0..4 {
             let id = blas.prim_ids[4 * j + l];
@@ -357,42 +437,14 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usi
             else {
                 continue;
             };
-            // SAFETY (loads and stores): `F8`/`I8` are 32-byte aligned.
             if _mm256_movemask_ps(edge) != 0 {
-                // Rare: some lane lies exactly on an edge; the scalar test for all lanes.
-                _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
-                _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
-                _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
-                _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
-                closest_scalar(r.rays, r.active, &mut out, &tri.lane(l), id as i32);
-                bt = _mm256_load_ps(out.t.0.as_ptr());
-                bu = _mm256_load_ps(out.u.0.as_ptr());
-                bv = _mm256_load_ps(out.v.0.as_ptr());
-                bid = _mm256_load_si256(out.id.0.as_ptr() as *const __m256i);
+                best.update_scalar(r.rays, r.active, &mut out, &tri.lane(l), id);
                 continue;
             }
-            let in_range =
-                _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min), _mm256_cmp_ps::<_CMP_LE_OQ>(t, bt));
-            let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), r.act);
-            // `t <= bt` here, so closer means `t < bt`, or `t == bt` and a smaller id.
-            let idv = _mm256_set1_epi32(id as i32);
-            let smaller_id = _mm256_castsi256_ps(_mm256_cmpgt_epi32(bid, idv));
-            let closer = _mm256_and_ps(hit, _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(t, bt), smaller_id));
-            bt = _mm256_blendv_ps(bt, t, closer);
-            bu = _mm256_blendv_ps(bu, u, closer);
-            bv = _mm256_blendv_ps(bv, v, closer);
-            bid = _mm256_castps_si256(_mm256_blendv_ps(
-                _mm256_castsi256_ps(bid),
-                _mm256_castsi256_ps(idv),
-                closer,
-            ));
+            best.update(t, u, v, reject, r.t_min, r.act, id);
         }
     }
-    // SAFETY: as above.
-    _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
-    _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
-    _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
-    _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
+    best.store(&mut out);
     out
 }
 
@@ -695,14 +747,14 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
     let k = r.uniform?;
     let mut stack = [PacketEntry { child: 0, count: 0, lanes: 0, t: 0.0 }; STACK8];
     let mut sp = 0usize;
-    let mut bt = r.t_max;
-    let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-    let mut bid = _mm256_set1_epi32(NO_HIT);
+    let mut best = Best8::new(r.t_max);
     let mut cur = PacketEntry { child: 0, count: 0, lanes: r.active, t: 0.0 };
     loop {
         if cur.count == 0 {
             let node = &blas.nodes8[cur.child as usize];
-            if let Some(next) = expand::<true>(node, &b, r.t_min, cull8(bt), cur.lanes, &mut stack, &mut sp) {
+            if let Some(next) =
+                expand::<true>(node, &b, r.t_min, cull8(best.t), cur.lanes, &mut stack, &mut sp)
+            {
                 cur = next;
                 continue;
             }
@@ -721,44 +773,16 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
                         continue;
                     };
                     if _mm256_movemask_ps(edge) != 0 {
-                        // SAFETY (stores and loads): `F8`/`I8` are 32-byte aligned.
-                        _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
-                        _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
-                        _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
-                        _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
-                        closest_scalar(r.rays, cur.lanes, &mut out, &tri.lane(l), id as i32);
-                        bt = _mm256_load_ps(out.t.0.as_ptr());
-                        bu = _mm256_load_ps(out.u.0.as_ptr());
-                        bv = _mm256_load_ps(out.v.0.as_ptr());
-                        bid = _mm256_load_si256(out.id.0.as_ptr() as *const __m256i);
+                        best.update_scalar(r.rays, cur.lanes, &mut out, &tri.lane(l), id);
                         continue;
                     }
-                    let in_range = _mm256_and_ps(
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
-                        _mm256_cmp_ps::<_CMP_LE_OQ>(t, bt),
-                    );
-                    let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act);
-                    let idv = _mm256_set1_epi32(id as i32);
-                    let smaller_id = _mm256_castsi256_ps(_mm256_cmpgt_epi32(bid, idv));
-                    let closer =
-                        _mm256_and_ps(hit, _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(t, bt), smaller_id));
-                    bt = _mm256_blendv_ps(bt, t, closer);
-                    bu = _mm256_blendv_ps(bu, u, closer);
-                    bv = _mm256_blendv_ps(bv, v, closer);
-                    bid = _mm256_castps_si256(_mm256_blendv_ps(
-                        _mm256_castsi256_ps(bid),
-                        _mm256_castsi256_ps(idv),
-                        closer,
-                    ));
+                    best.update(t, u, v, reject, r.t_min, act, id);
                 }
             }
         }
         // Next pending subtree (its box tests cull the lanes that found closer hits).
         if sp == 0 {
-            _mm256_store_ps(out.t.0.as_mut_ptr(), bt);
-            _mm256_store_ps(out.u.0.as_mut_ptr(), bu);
-            _mm256_store_ps(out.v.0.as_mut_ptr(), bv);
-            _mm256_store_si256(out.id.0.as_mut_ptr() as *mut __m256i, bid);
+            best.store(&mut out);
             return Some(out);
         }
         sp -= 1;

@@ -322,30 +322,13 @@ pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32
             _mm_load_ps(pb.add(12 * c + off)),
         )
     };
-    let [ox, oy, oz] = r.o;
-    let [sx, sy, sz] = r.s;
-    // Translate, shear and scale each corner (Woop et al. 2013, steps 1-2).
-    let (a0, a1, a2) = (row(0, rx), row(0, ry), row(0, rz));
-    let (b0, b1, b2) = (row(1, rx), row(1, ry), row(1, rz));
-    let (c0, c1, c2) = (row(2, rx), row(2, ry), row(2, rz));
-    let (az, bz, cz) = (_mm256_sub_ps(a2, oz), _mm256_sub_ps(b2, oz), _mm256_sub_ps(c2, oz));
-    let ax = _mm256_sub_ps(_mm256_sub_ps(a0, ox), _mm256_mul_ps(sx, az));
-    let ay = _mm256_sub_ps(_mm256_sub_ps(a1, oy), _mm256_mul_ps(sy, az));
-    let bx = _mm256_sub_ps(_mm256_sub_ps(b0, ox), _mm256_mul_ps(sx, bz));
-    let by = _mm256_sub_ps(_mm256_sub_ps(b1, oy), _mm256_mul_ps(sy, bz));
-    let cx = _mm256_sub_ps(_mm256_sub_ps(c0, ox), _mm256_mul_ps(sx, cz));
-    let cy = _mm256_sub_ps(_mm256_sub_ps(c1, oy), _mm256_mul_ps(sy, cz));
-    let (az, bz, cz) = (_mm256_mul_ps(sz, az), _mm256_mul_ps(sz, bz), _mm256_mul_ps(sz, cz));
-    // Edge functions (step 3).
-    let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-    let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-    let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-    let zero = _mm256_setzero_ps();
-    let on_edge = _mm256_or_ps(
-        _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
-        _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+    let (p0, p1, p2) = (
+        [row(0, rx), row(0, ry), row(0, rz)],
+        [row(1, rx), row(1, ry), row(1, rz)],
+        [row(2, rx), row(2, ry), row(2, rz)],
     );
-    if _mm256_movemask_ps(on_edge) as u32 & lanes != 0 {
+    let (e, z) = sheared_edges(p0, p1, p2, r.o, r.s);
+    if _mm256_movemask_ps(any_zero(e)) as u32 & lanes != 0 {
         // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
         return edge_fallback(r, a, b, lanes, t_max);
     }
@@ -354,20 +337,74 @@ pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32
     // is "the sign bits differ", and `det = U + V + W` of same-signed non-zero terms is
     // never zero: the scalar test's `det == 0` rejection cannot trigger. Four operations
     // instead of thirteen compares and ors, with the same decisions.
-    let mixed = _mm256_or_ps(_mm256_xor_ps(u, v), _mm256_xor_ps(u, w));
-    let reject = _mm256_castsi256_ps(_mm256_srai_epi32::<31>(_mm256_castps_si256(mixed)));
-    let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+    let reject = mixed_signs(e);
     // Hit distance (step 4); NaN lanes (unused) fail both range tests.
-    let t_scaled =
-        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
-    let rcp = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-    let t = _mm256_mul_ps(t_scaled, rcp);
+    let (t, u, v) = hit_distance(e, z);
     let in_range = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min8),
         _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
     );
     let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), lane_mask(lanes));
-    Lanes { hit, t, u: _mm256_mul_ps(v, rcp), v: _mm256_mul_ps(w, rcp) }
+    Lanes { hit, t, u, v }
+}
+
+/// Translate, shear and scale the corners `a`, `b`, `c` (x, y, z rows, 8 lanes) into the
+/// ray space of origins `o` and shear constants `s` (Woop et al. 2013, steps 1-2), and the
+/// edge functions `[U, V, W]` (step 3); returns them with the scaled corner depths.
+#[inline(always)]
+pub(crate) unsafe fn sheared_edges(
+    a: [__m256; 3],
+    b: [__m256; 3],
+    c: [__m256; 3],
+    o: [__m256; 3],
+    s: [__m256; 3],
+) -> ([__m256; 3], [__m256; 3]) {
+    let ([a0, a1, a2], [b0, b1, b2], [c0, c1, c2]) = (a, b, c);
+    let ([ox, oy, oz], [sx, sy, sz]) = (o, s);
+    let (az, bz, cz) = (_mm256_sub_ps(a2, oz), _mm256_sub_ps(b2, oz), _mm256_sub_ps(c2, oz));
+    let ax = _mm256_sub_ps(_mm256_sub_ps(a0, ox), _mm256_mul_ps(sx, az));
+    let ay = _mm256_sub_ps(_mm256_sub_ps(a1, oy), _mm256_mul_ps(sy, az));
+    let bx = _mm256_sub_ps(_mm256_sub_ps(b0, ox), _mm256_mul_ps(sx, bz));
+    let by = _mm256_sub_ps(_mm256_sub_ps(b1, oy), _mm256_mul_ps(sy, bz));
+    let cx = _mm256_sub_ps(_mm256_sub_ps(c0, ox), _mm256_mul_ps(sx, cz));
+    let cy = _mm256_sub_ps(_mm256_sub_ps(c1, oy), _mm256_mul_ps(sy, cz));
+    let z = [_mm256_mul_ps(sz, az), _mm256_mul_ps(sz, bz), _mm256_mul_ps(sz, cz)];
+    let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+    let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+    let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+    ([u, v, w], z)
+}
+
+/// Lanes where an edge function is exactly zero (the ray meets an edge or vertex: the
+/// scalar test's f64 recomputation decides).
+#[inline(always)]
+pub(crate) unsafe fn any_zero([u, v, w]: [__m256; 3]) -> __m256 {
+    let zero = _mm256_setzero_ps();
+    _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+        _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+    )
+}
+
+/// All ones where the (non-zero) edge functions have mixed signs: outside the triangle.
+#[inline(always)]
+pub(crate) unsafe fn mixed_signs([u, v, w]: [__m256; 3]) -> __m256 {
+    let mixed = _mm256_or_ps(_mm256_xor_ps(u, v), _mm256_xor_ps(u, w));
+    _mm256_castsi256_ps(_mm256_srai_epi32::<31>(_mm256_castps_si256(mixed)))
+}
+
+/// Step 4: the hit distance and barycentrics `(t, V / det, W / det)`, `det = U + V + W`,
+/// from the edge functions `e` and scaled corner depths `z`.
+#[inline(always)]
+pub(crate) unsafe fn hit_distance(
+    [u, v, w]: [__m256; 3],
+    [az, bz, cz]: [__m256; 3],
+) -> (__m256, __m256, __m256) {
+    let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+    let t_scaled =
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
+    let rcp = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+    (_mm256_mul_ps(t_scaled, rcp), _mm256_mul_ps(v, rcp), _mm256_mul_ps(w, rcp))
 }
 
 /// All ones in the lanes set in `lanes` (`0xff` or `0x0f`).

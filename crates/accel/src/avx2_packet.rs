@@ -27,6 +27,7 @@
 //! callers reach only when [`crate::Simd::Avx2`] is available; helpers are
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
+use crate::avx2::{any_zero, hit_distance, mixed_signs, sheared_edges};
 use crate::packet::{RayPacket, LANES};
 use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
@@ -357,35 +358,13 @@ unsafe fn test_tri<const UNIFORM: bool, const EARLY: bool>(
     act: __m256,
     k: [usize; 3],
 ) -> Option<(__m256, __m256, __m256, __m256, __m256)> {
-    let [ox, oy, oz] = r.o;
-    let [sx, sy, sz] = r.s;
-    let [a0, a1, a2] = corner::<UNIFORM>(tri, corners, 0, l, r, k);
-    let [b0, b1, b2] = corner::<UNIFORM>(tri, corners, 1, l, r, k);
-    let [c0, c1, c2] = corner::<UNIFORM>(tri, corners, 2, l, r, k);
-    // Translate, shear and scale each corner (Woop et al. 2013, steps 1-2).
-    let (az, bz, cz) = (_mm256_sub_ps(a2, oz), _mm256_sub_ps(b2, oz), _mm256_sub_ps(c2, oz));
-    let ax = _mm256_sub_ps(_mm256_sub_ps(a0, ox), _mm256_mul_ps(sx, az));
-    let ay = _mm256_sub_ps(_mm256_sub_ps(a1, oy), _mm256_mul_ps(sy, az));
-    let bx = _mm256_sub_ps(_mm256_sub_ps(b0, ox), _mm256_mul_ps(sx, bz));
-    let by = _mm256_sub_ps(_mm256_sub_ps(b1, oy), _mm256_mul_ps(sy, bz));
-    let cx = _mm256_sub_ps(_mm256_sub_ps(c0, ox), _mm256_mul_ps(sx, cz));
-    let cy = _mm256_sub_ps(_mm256_sub_ps(c1, oy), _mm256_mul_ps(sy, cz));
-    let (az, bz, cz) = (_mm256_mul_ps(sz, az), _mm256_mul_ps(sz, bz), _mm256_mul_ps(sz, cz));
-    // Edge functions (step 3).
-    let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-    let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-    let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-    let zero = _mm256_setzero_ps();
-    let edge = _mm256_and_ps(
-        act,
-        _mm256_or_ps(
-            _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
-            _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
-        ),
-    );
+    let a = corner::<UNIFORM>(tri, corners, 0, l, r, k);
+    let b = corner::<UNIFORM>(tri, corners, 1, l, r, k);
+    let c = corner::<UNIFORM>(tri, corners, 2, l, r, k);
+    let (e, z) = sheared_edges(a, b, c, r.o, r.s);
+    let edge = _mm256_and_ps(act, any_zero(e));
     // Mixed signs: outside (no lane with a zero edge function gets here; see `test8v`).
-    let mixed = _mm256_or_ps(_mm256_xor_ps(u, v), _mm256_xor_ps(u, w));
-    let reject = _mm256_castsi256_ps(_mm256_srai_epi32::<31>(_mm256_castps_si256(mixed)));
+    let reject = mixed_signs(e);
     if EARLY && _mm256_movemask_ps(_mm256_or_ps(_mm256_andnot_ps(reject, act), edge)) == 0 {
         // No lane inside the triangle: skip the division. Only for coherent packets
         // (camera tiles), where the branch is predictable: Cornell, packet primary closest
@@ -393,13 +372,8 @@ unsafe fn test_tri<const UNIFORM: bool, const EARLY: bool>(
         // cost more than the division (-8 to -13 %).
         return None;
     }
-    let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
-    // Hit distance (step 4).
-    let t_scaled =
-        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
-    let rcp = _mm256_div_ps(_mm256_set1_ps(1.0), det);
-    let t = _mm256_mul_ps(t_scaled, rcp);
-    Some((edge, reject, t, _mm256_mul_ps(v, rcp), _mm256_mul_ps(w, rcp)))
+    let (t, u, v) = hit_distance(e, z);
+    Some((edge, reject, t, u, v))
 }
 
 /// Closest hits of the lanes of `rays` set in `active` among all triangles of the flat

@@ -22,7 +22,7 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
-use crate::integrator::lanes::LANES;
+use crate::integrator::lanes::{LANES, M8};
 use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
 use crate::integrator::{self, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
@@ -416,7 +416,7 @@ impl Renderer {
             for (g, group) in row_pixels.chunks_mut(LANES).enumerate() {
                 let x0 = (g * LANES) as u32;
                 let n = group.len();
-                let lanes: [bool; LANES] = std::array::from_fn(|i| i < n);
+                let lanes = M8::from_array(std::array::from_fn(|i| i < n));
                 let x: [u32; LANES] = std::array::from_fn(|i| x0 + i as u32);
                 let key: [u32; LANES] =
                     std::array::from_fn(|i| Sampler::pixel_key(x[i], y, self.settings.seed));

@@ -15,7 +15,7 @@
 
 use filtrace_core::sampler::{hash_combine, hash_u32, laine_karras_permutation, sobol_dim1_reversed};
 use filtrace_core::Vec3;
-use std::ops::{Add, Div, Mul, Neg, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Number of lanes (paths traced in lockstep).
 pub const LANES: usize = 8;
@@ -25,8 +25,82 @@ pub const LANES: usize = 8;
 #[repr(align(32))]
 pub struct F8(pub [f32; LANES]);
 
-/// Eight booleans (lane masks).
-pub type M8 = [bool; LANES];
+/// Eight lane masks as `-1` (set) / `0` (clear) integer lanes: a comparison of two [`F8`]
+/// is one `vcmpps`, `&`/`|`/`!` one integer instruction each, a [`select`] one `vblendvps`
+/// (the earlier `[bool; 8]` masks packed and unpacked bytes around every operation: 3-6
+/// instructions per lane op, the largest item of the lane code's instruction count).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(align(32))]
+pub struct M8(pub [i32; LANES]);
+
+impl M8 {
+    /// No lane set.
+    pub const NONE: M8 = M8([0; LANES]);
+
+    /// Every lane `b`.
+    #[inline(always)]
+    pub fn splat(b: bool) -> M8 {
+        M8([-(b as i32); LANES])
+    }
+    /// Lane `i` of a `bool` array.
+    #[inline(always)]
+    pub fn from_array(b: [bool; LANES]) -> M8 {
+        M8(per_lane(|i| -(b[i] as i32)))
+    }
+    /// Lane `i`.
+    #[inline(always)]
+    pub fn get(&self, i: usize) -> bool {
+        self.0[i] != 0
+    }
+    /// Sets lane `i` to `b`.
+    #[inline(always)]
+    pub fn set(&mut self, i: usize, b: bool) {
+        self.0[i] = -(b as i32);
+    }
+    /// `m ? a : b` per lane.
+    #[inline(always)]
+    pub fn select(m: M8, a: M8, b: M8) -> M8 {
+        (m & a) | (!m & b)
+    }
+    /// Any lane set.
+    #[inline(always)]
+    pub fn any(self) -> bool {
+        bits(self) != 0
+    }
+    /// Number of lanes set.
+    #[inline(always)]
+    pub fn count(self) -> u32 {
+        bits(self).count_ones()
+    }
+}
+
+impl BitAnd for M8 {
+    type Output = M8;
+    #[inline(always)]
+    fn bitand(self, o: M8) -> M8 {
+        M8(per_lane(|i| self.0[i] & o.0[i]))
+    }
+}
+impl BitOr for M8 {
+    type Output = M8;
+    #[inline(always)]
+    fn bitor(self, o: M8) -> M8 {
+        M8(per_lane(|i| self.0[i] | o.0[i]))
+    }
+}
+impl Not for M8 {
+    type Output = M8;
+    #[inline(always)]
+    fn not(self) -> M8 {
+        M8(per_lane(|i| !self.0[i]))
+    }
+}
+
+/// The mask lane of a comparison result.
+#[inline(always)]
+fn m(b: bool) -> i32 {
+    -(b as i32)
+}
 
 /// `[f(0), ..., f(7)]` by a plain loop: `std::array::from_fn` and `<[T; N]>::map` were
 /// sometimes left out of line, and an out-of-line helper is compiled without AVX2.
@@ -72,84 +146,84 @@ impl F8 {
     /// Lane-wise `self > o`.
     #[inline(always)]
     pub fn gt(self, o: F8) -> M8 {
-        per_lane(|i| self.0[i] > o.0[i])
+        M8(per_lane(|i| m(self.0[i] > o.0[i])))
     }
     /// Lane-wise `self < o`.
     #[inline(always)]
     pub fn lt(self, o: F8) -> M8 {
-        per_lane(|i| self.0[i] < o.0[i])
+        M8(per_lane(|i| m(self.0[i] < o.0[i])))
     }
     /// Lane-wise `self <= o`.
     #[inline(always)]
     pub fn le(self, o: F8) -> M8 {
-        per_lane(|i| self.0[i] <= o.0[i])
+        M8(per_lane(|i| m(self.0[i] <= o.0[i])))
     }
     /// Lane-wise `is_finite`.
     #[inline(always)]
     pub fn is_finite(self) -> M8 {
-        per_lane(|i| self.0[i].is_finite())
+        M8(per_lane(|i| m(self.0[i].is_finite())))
     }
     /// Lane-wise `is_infinite`.
     #[inline(always)]
     pub fn is_infinite(self) -> M8 {
-        per_lane(|i| self.0[i].is_infinite())
+        M8(per_lane(|i| m(self.0[i].is_infinite())))
     }
     /// Lane-wise `is_nan`.
     #[inline(always)]
     pub fn is_nan(self) -> M8 {
-        per_lane(|i| self.0[i].is_nan())
+        M8(per_lane(|i| m(self.0[i].is_nan())))
     }
     /// Lane-wise `self >= o`.
     #[inline(always)]
     pub fn ge(self, o: F8) -> M8 {
-        per_lane(|i| self.0[i] >= o.0[i])
+        M8(per_lane(|i| m(self.0[i] >= o.0[i])))
     }
     /// Lane-wise `self == o`.
     #[inline(always)]
     pub fn eq(self, o: F8) -> M8 {
-        per_lane(|i| self.0[i] == o.0[i])
+        M8(per_lane(|i| m(self.0[i] == o.0[i])))
     }
 }
 
 /// `m ? a : b` per lane.
 #[inline(always)]
 pub fn select(m: M8, a: F8, b: F8) -> F8 {
-    F8(per_lane(|i| if m[i] { a.0[i] } else { b.0[i] }))
+    F8(per_lane(|i| if m.0[i] < 0 { a.0[i] } else { b.0[i] }))
 }
 
 /// Lane-wise `a && b` (written `&`: a short-circuit `&&` becomes branches, not one
 /// vector instruction; cachegrind counted 340 instructions per bounce).
 #[inline(always)]
 pub fn and(a: M8, b: M8) -> M8 {
-    per_lane(|i| a[i] & b[i])
+    a & b
 }
 
 /// Lane-wise `a || b`.
 #[inline(always)]
 pub fn or(a: M8, b: M8) -> M8 {
-    per_lane(|i| a[i] | b[i])
+    a | b
 }
 
 /// Lane-wise `!a`.
 #[inline(always)]
 pub fn not(a: M8) -> M8 {
-    per_lane(|i| !a[i])
+    !a
 }
 
 /// The mask as bits (bit `i` = lane `i`).
 #[inline(always)]
 pub fn bits(m: M8) -> u8 {
-    let mut b = 0u8;
-    for (i, &x) in m.iter().enumerate() {
-        b |= (x as u8) << i;
+    let mut b = 0u32;
+    for i in 0..LANES {
+        b |= ((m.0[i] as u32) >> 31) << i;
     }
-    b
+    b as u8
 }
 
 /// The bits as a mask.
 #[inline(always)]
 pub fn from_bits(b: u8) -> M8 {
-    per_lane(|i| b & (1 << i) != 0)
+    M8(per_lane(|i| -(((b >> i) & 1) as i32)))
 }
 
 impl Add for F8 {
@@ -251,7 +325,7 @@ impl V8 {
     /// Lane-wise glam `is_finite`.
     #[inline(always)]
     pub fn is_finite(self) -> M8 {
-        per_lane(|i| self.x.0[i].is_finite() & self.y.0[i].is_finite() & self.z.0[i].is_finite())
+        self.x.is_finite() & self.y.is_finite() & self.z.is_finite()
     }
     /// Per-lane select.
     #[inline(always)]

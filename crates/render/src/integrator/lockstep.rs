@@ -111,7 +111,7 @@ impl Surf8 {
             n_g: self.n_g.lane(i),
             n_s: self.n_s.lane(i),
             n_winding: self.n_winding.lane(i),
-            front_face: self.front_face[i],
+            front_face: self.front_face.get(i),
             wo: self.wo.lane(i),
             uv: self.uv[i],
             material: self.material[i],
@@ -128,7 +128,7 @@ impl Surf8 {
         self.n_g.set_lane(i, si.n_g);
         self.n_s.set_lane(i, si.n_s);
         self.n_winding.set_lane(i, si.n_winding);
-        self.front_face[i] = si.front_face;
+        self.front_face.set(i, si.front_face);
         self.wo.set_lane(i, si.wo);
         self.uv[i] = si.uv;
         self.material[i] = si.material;
@@ -152,7 +152,15 @@ impl Surf8 {
 /// Iterates over the set lanes of `m`.
 #[inline(always)]
 fn lanes_of(m: M8) -> impl Iterator<Item = usize> {
-    (0..LANES).filter(move |&i| m[i])
+    let mut b = bits(m) as u32;
+    std::iter::from_fn(move || {
+        if b == 0 {
+            return None;
+        }
+        let i = b.trailing_zeros() as usize;
+        b &= b - 1;
+        Some(i)
+    })
 }
 
 /// [`SurfaceInteraction::from_hit`] for the lanes of `hits`: in lanes for meshes without
@@ -167,13 +175,13 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8
     let mut p2 = V8::default();
     let mut n = V8::default();
     let mut scale = F8::default();
-    let mut plain = [false; LANES];
-    let mut scalar_ok = [false; LANES];
+    let mut plain = M8::NONE;
+    let mut scalar_ok = M8::NONE;
     let mut scalar = [None; LANES];
     for i in lanes_of(hit) {
         match ctx.geometry.plain_record(hits.instance[i], hits.prim[i]) {
             Some(r) => {
-                plain[i] = true;
+                plain.set(i, true);
                 p0.set_lane(i, r.p[0]);
                 p1.set_lane(i, r.p[1]);
                 p2.set_lane(i, r.p[2]);
@@ -191,7 +199,7 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8
                 };
                 let ray = Ray::new(Vec3::ZERO, dir.lane(i));
                 scalar[i] = SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h);
-                scalar_ok[i] = scalar[i].is_some();
+                scalar_ok.set(i, scalar[i].is_some());
             }
         }
         s.instance[i] = hits.instance[i];
@@ -351,7 +359,7 @@ pub fn trace_group(
     let sampler = Sampler8::new(*key, index);
     let mut out = [CameraSample::default(); LANES];
     stats.groups += 1;
-    stats.camera_lanes += lanes.iter().filter(|&&l| l).count() as u64;
+    stats.camera_lanes += lanes.count() as u64;
 
     // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
     let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
@@ -372,7 +380,7 @@ pub fn trace_group(
     let hit = from_hits(ctx, &dir, &hits, &mut si);
     let want_surface = index == 0;
     for i in lanes_of(lanes) {
-        if hit[i] {
+        if hit.get(i) {
             if want_surface {
                 out[i].surface = Some(visible_surface(ctx, &si.lane(i)));
             }
@@ -389,25 +397,25 @@ pub fn trace_group(
     let mut l_direct = V8::default();
     let mut l_indirect = V8::default();
     let mut p_b = zero;
-    let mut specular = [false; LANES];
+    let mut specular = M8::NONE;
     let mut prev_p = V8::default();
     let mut vertex = 0u32;
     let materials = &ctx.scene.materials;
     let default_bsdf = SurfaceBsdf::Diffuse(Diffuse::new(Rgb::ZERO));
 
     loop {
-        stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.iter().filter(|&&a| a).count() as u64;
+        stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.count() as u64;
         stats.bounces += 1;
 
         // Emitted radiance at the vertex (per lane: few lanes hit an emitter).
         for i in lanes_of(act) {
             let m = &materials[si.material[i] as usize];
-            if !(m.is_emissive() && (si.front_face[i] || m.two_sided_emission)) {
+            if !(m.is_emissive() && (si.front_face.get(i) || m.two_sided_emission)) {
                 continue;
             }
             let le = m.emission;
             if le != Rgb::ZERO {
-                let w_b = if vertex == 0 || specular[i] {
+                let w_b = if vertex == 0 || specular.get(i) {
                     1.0
                 } else {
                     let p_l = ctx.lights.pdf_area(
@@ -435,23 +443,23 @@ pub fn trace_group(
 
         // The BSDFs, the shading frames and wo in them.
         let mut bsdf = [default_bsdf; LANES];
-        let mut diffuse = [false; LANES];
-        let mut lobe = [false; LANES];
+        let mut diffuse = M8::NONE;
+        let mut lobe = M8::NONE;
         let mut rho = V8::default();
         for i in lanes_of(act) {
             // Untextured Lambert (most surfaces): its reflectance only, no BSDF record.
             if let Some(r) = ctx.geometry.constant_diffuse(si.material[i]) {
-                diffuse[i] = true;
+                diffuse.set(i, true);
                 rho.set_lane(i, r);
                 continue;
             }
             bsdf[i] = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
             match &bsdf[i] {
                 SurfaceBsdf::Diffuse(d) => {
-                    diffuse[i] = true;
+                    diffuse.set(i, true);
                     rho.set_lane(i, d.reflectance);
                 }
-                b => lobe[i] = b.has_lobe_choice(),
+                b => lobe.set(i, b.has_lobe_choice()),
             }
         }
         let glossy = and(act, not(diffuse));
@@ -463,7 +471,7 @@ pub fn trace_group(
         let base = vertex_slot(vertex);
         let (ulx, uly) = sampler.next_2d(base + SLOT_LIGHT);
         let (ubx, uby) = sampler.next_2d(base + SLOT_BSDF);
-        let (u_select, u_lobe) = if lobe.iter().any(|&l| l) {
+        let (u_select, u_lobe) = if lobe.any() {
             let (cx, cy) = sampler.next_2d(base + SLOT_CHOICES);
             (cx, select(lobe, cy, zero))
         } else {
@@ -472,45 +480,45 @@ pub fn trace_group(
 
         // Next-event estimation (`sample_one_light`): light choice per lane, area lights
         // sampled in lanes, other lights by the scalar `sample_li`.
-        let mut area = [false; LANES];
-        let mut ls_ok = [false; LANES];
+        let mut area = M8::NONE;
+        let mut ls_ok = M8::NONE;
         let mut ls_wi = V8::default();
         let mut ls_li = V8::default();
         let mut ls_pdf = zero;
         let mut ls_dist = zero;
-        let mut ls_delta = [false; LANES];
+        let mut ls_delta = M8::NONE;
         let mut pmf = zero;
         let (mut a_p0, mut a_e1, mut a_e2, mut a_n) =
             (V8::default(), V8::default(), V8::default(), V8::default());
         let mut a_area = zero;
-        let mut a_two = [false; LANES];
+        let mut a_two = M8::NONE;
         for i in lanes_of(act) {
             let (li, pm) = ctx.lights.select(u_select.0[i]);
             if pm > 0.0 {
                 if let Some(a) = ctx.lights.area_light(li) {
-                    area[i] = true;
+                    area.set(i, true);
                     pmf.0[i] = pm;
                     a_p0.set_lane(i, a.p0);
                     a_e1.set_lane(i, a.e1);
                     a_e2.set_lane(i, a.e2);
                     a_n.set_lane(i, a.n);
                     a_area.0[i] = a.area;
-                    a_two[i] = a.two_sided;
+                    a_two.set(i, a.two_sided);
                     ls_li.set_lane(i, a.le);
                     continue;
                 }
             }
             if let Some(ls) = ctx.lights.sample_li(si.p.lane(i), u_select.0[i], Vec2::new(ulx.0[i], uly.0[i]))
             {
-                ls_ok[i] = true;
+                ls_ok.set(i, true);
                 ls_wi.set_lane(i, ls.wi);
                 ls_li.set_lane(i, ls.li);
                 ls_pdf.0[i] = ls.pdf;
                 ls_dist.0[i] = ls.dist;
-                ls_delta[i] = ls.delta;
+                ls_delta.set(i, ls.delta);
             }
         }
-        if area.iter().any(|&a| a) {
+        if area.any() {
             // `AreaLight::sample` with `sample_uniform_triangle`.
             let m = F8::splat(0.5) * ulx.min(uly);
             let b0 = ulx - m;
@@ -531,9 +539,7 @@ pub fn trace_group(
                 and(and(dist2.gt(zero), front), and(not(c.le(zero)), and(pdf_a.gt(zero), pdf_a.is_finite())));
             let ok = and(area, ok);
             let pdf = pmf * pdf_a;
-            for i in lanes_of(area) {
-                ls_ok[i] = ok[i];
-            }
+            ls_ok = M8::select(area, ok, ls_ok);
             ls_wi = V8::select(area, wi, ls_wi);
             ls_pdf = select(area, pdf, ls_pdf);
             ls_dist = select(area, dist, ls_dist);
@@ -578,17 +584,17 @@ pub fn trace_group(
         let mut bs_pdf = bs_wi.z.max(zero) * F8::splat(FRAC_1_PI);
         let mut bs_f = f_d;
         let mut bs_ok = and(not(wo.z.le(zero)), not(bs_pdf.le(zero)));
-        let mut bs_spec = [false; LANES];
+        let mut bs_spec = M8::NONE;
         for i in lanes_of(glossy) {
             match bsdf[i].sample(wo.lane(i), Vec2::new(ubx.0[i], uby.0[i]), u_lobe.0[i]) {
                 Some(bs) => {
-                    bs_ok[i] = true;
+                    bs_ok.set(i, true);
                     bs_wi.set_lane(i, bs.wi);
                     bs_f.set_lane(i, bs.f);
                     bs_pdf.0[i] = bs.pdf;
-                    bs_spec[i] = bs.specular;
+                    bs_spec.set(i, bs.specular);
                 }
-                None => bs_ok[i] = false,
+                None => bs_ok.set(i, false),
             }
         }
         let mut cont = and(act, bs_ok);
@@ -596,9 +602,7 @@ pub fn trace_group(
         let new_beta = beta * (bs_f * (bs_wi.z.abs() / bs_pdf));
         beta = V8::select(cont, new_beta, beta);
         p_b = select(cont, bs_pdf, p_b);
-        for i in lanes_of(cont) {
-            specular[i] = bs_spec[i];
-        }
+        specular = M8::select(cont, bs_spec, specular);
         prev_p = V8::select(cont, si.p, prev_p);
         cont = and(cont, and(not(beta.is_zero()), beta.is_finite()));
         let org = si.offset_origin(wi);
@@ -612,7 +616,7 @@ pub fn trace_group(
         }
         vertex += 1;
         act = cont;
-        if !act.iter().any(|&a| a) {
+        if !act.any() {
             break;
         }
 
@@ -628,7 +632,7 @@ pub fn trace_group(
                 let w = wi.lane(i);
                 let le = ctx.lights.environment_radiance(w);
                 if le != Rgb::ZERO {
-                    let w_b = if specular[i] {
+                    let w_b = if specular.get(i) {
                         1.0
                     } else {
                         power_heuristic(1.0, p_b.0[i], 1.0, ctx.lights.pdf_environment(w))
@@ -643,7 +647,7 @@ pub fn trace_group(
             }
         }
         act = and(act, found);
-        if !act.iter().any(|&a| a) {
+        if !act.any() {
             break;
         }
     }

@@ -34,7 +34,7 @@ use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
     SLOT_PIXEL, SLOT_RR,
 };
-use crate::bsdf::{Diffuse, SurfaceBsdf};
+use crate::bsdf::SurfaceBsdf;
 use crate::camera::PinholeCamera;
 use crate::film::VisibleSurface;
 use crate::surface::{gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION};
@@ -401,7 +401,6 @@ pub fn trace_group(
     let mut prev_p = V8::default();
     let mut vertex = 0u32;
     let materials = &ctx.scene.materials;
-    let default_bsdf = SurfaceBsdf::Diffuse(Diffuse::new(Rgb::ZERO));
 
     loop {
         stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.count() as u64;
@@ -442,7 +441,9 @@ pub fn trace_group(
         }
 
         // The BSDFs, the shading frames and wo in them.
-        let mut bsdf = [default_bsdf; LANES];
+        // `None` stores one tag byte per lane (a default BSDF copied into eight lanes
+        // was a memset/memcpy per bounce); only the glossy lanes read their BSDF.
+        let mut bsdf: [Option<SurfaceBsdf>; LANES] = [None; LANES];
         let mut diffuse = M8::NONE;
         let mut lobe = M8::NONE;
         let mut rho = V8::default();
@@ -453,14 +454,15 @@ pub fn trace_group(
                 rho.set_lane(i, r);
                 continue;
             }
-            bsdf[i] = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
-            match &bsdf[i] {
+            let b = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
+            match &b {
                 SurfaceBsdf::Diffuse(d) => {
                     diffuse.set(i, true);
                     rho.set_lane(i, d.reflectance);
                 }
                 b => lobe.set(i, b.has_lobe_choice()),
             }
+            bsdf[i] = Some(b);
         }
         let glossy = and(act, not(diffuse));
         let (fx, fy) = frame_from_z(si.n_s);
@@ -553,9 +555,11 @@ pub fn trace_group(
         let mut f = V8::select(above, f_d, V8::default()) * wi_l.z.abs();
         let mut pdf_b = select(above, wi_l.z.max(zero) * F8::splat(FRAC_1_PI), zero);
         for i in lanes_of(and(glossy, usable)) {
-            let (wo_i, wi_i) = (wo.lane(i), wi_l.lane(i));
-            f.set_lane(i, bsdf[i].f(wo_i, wi_i) * wi_i.z.abs());
-            pdf_b.0[i] = bsdf[i].pdf(wo_i, wi_i);
+            if let Some(b) = &bsdf[i] {
+                let (wo_i, wi_i) = (wo.lane(i), wi_l.lane(i));
+                f.set_lane(i, b.f(wo_i, wi_i) * wi_i.z.abs());
+                pdf_b.0[i] = b.pdf(wo_i, wi_i);
+            }
         }
         let shadow = and(usable, not(f.is_zero()));
         let s_org = si.offset_origin(ls_wi);
@@ -586,7 +590,10 @@ pub fn trace_group(
         let mut bs_ok = and(not(wo.z.le(zero)), not(bs_pdf.le(zero)));
         let mut bs_spec = M8::NONE;
         for i in lanes_of(glossy) {
-            match bsdf[i].sample(wo.lane(i), Vec2::new(ubx.0[i], uby.0[i]), u_lobe.0[i]) {
+            let sample = bsdf[i]
+                .as_ref()
+                .and_then(|b| b.sample(wo.lane(i), Vec2::new(ubx.0[i], uby.0[i]), u_lobe.0[i]));
+            match sample {
                 Some(bs) => {
                     bs_ok.set(i, true);
                     bs_wi.set_lane(i, bs.wi);

@@ -95,6 +95,10 @@ const SOBOL_DIM1_REV_BYTES: [[u32; 256]; 4] = {
     byte_tables(cols)
 };
 
+/// The four byte tables of [`sobol_dim1_reversed`] (for samplers that look them up with
+/// SIMD gathers, e.g. the render crate's 8-lane sampler).
+pub static SOBOL_DIM1_REV_TABLES: [[u32; 256]; 4] = SOBOL_DIM1_REV_BYTES;
+
 /// `reverse(sobol_dim1(reverse(i_rev)))` by four table lookups (public for samplers that
 /// evaluate several sample keys at once, e.g. the render crate's 8-lane sampler).
 #[inline]

@@ -377,7 +377,7 @@ impl Renderer {
         end: u32,
         stats: &mut LaneStats,
     ) {
-        self.lockstep_tile(y0, pixels, first, end, stats)
+        self.lockstep_tile::<true>(y0, pixels, first, end, stats)
     }
 
     /// The portable lane code.
@@ -389,14 +389,14 @@ impl Renderer {
         end: u32,
         stats: &mut LaneStats,
     ) {
-        self.lockstep_tile(y0, pixels, first, end, stats)
+        self.lockstep_tile::<false>(y0, pixels, first, end, stats)
     }
 
     /// Groups of [`LANES`] adjacent pixels of each row, one sample index at a time; each
     /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
     /// the same bit for bit.
     #[inline(always)]
-    fn lockstep_tile(
+    fn lockstep_tile<const AVX2: bool>(
         &self,
         y0: usize,
         pixels: &mut [FilmPixel],
@@ -423,7 +423,7 @@ impl Renderer {
                 let mut acc: [FilmPixel; LANES] =
                     std::array::from_fn(|i| group.get(i).copied().unwrap_or_default());
                 for index in first..end {
-                    let s = lockstep::trace_group(&lc, &x, y, &key, index, lanes, stats);
+                    let s = lockstep::trace_group::<AVX2>(&lc, &x, y, &key, index, lanes, stats);
                     for i in 0..n {
                         if let Some(surface) = s[i].surface {
                             acc[i].surface = surface;

@@ -13,7 +13,9 @@
 //! Everything is `#[inline(always)]` loops over `[_; 8]` so that, inlined into a function
 //! compiled for AVX2 ([`super::lockstep`]), each loop becomes one or two ymm instructions.
 
-use filtrace_core::sampler::{hash_combine, hash_u32, laine_karras_permutation, sobol_dim1_reversed};
+use filtrace_core::sampler::{
+    hash_combine, hash_u32, laine_karras_permutation, sobol_dim1_reversed, SOBOL_DIM1_REV_TABLES,
+};
 use filtrace_core::Vec3;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -411,7 +413,10 @@ fn u8x(f: impl Fn(usize) -> u32) -> [u32; LANES] {
 ///
 /// [`Sampler::pixel_key`]: filtrace_core::sampler::Sampler::pixel_key
 #[derive(Clone, Copy, Debug)]
-pub struct Sampler8 {
+///
+/// `AVX2 = true` (only inside code compiled for AVX2, such as the AVX2 tile loop) looks up
+/// the Sobol byte tables with four `vpgatherdd` instead of 32 scalar loads.
+pub struct Sampler8<const AVX2: bool> {
     pub key: [u32; LANES],
     index_rev: u32,
 }
@@ -422,7 +427,44 @@ fn unit8(x: [u32; LANES]) -> F8 {
     F8(per_lane(|i| (x[i] >> 8) as f32 * (1.0 / 16_777_216.0)))
 }
 
-impl Sampler8 {
+/// [`sobol_dim1_reversed`] of eight lanes: table gathers when `AVX2` (the caller must be
+/// code compiled with AVX2 enabled), else scalar lookups.
+#[inline(always)]
+fn sobol_dim1_reversed8<const AVX2: bool>(i_rev: [u32; LANES]) -> [u32; LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2 = true` is only instantiated inside the AVX2 tile loop, which runs
+        // after runtime detection of AVX2 (`Renderer::render_tile_lockstep`).
+        return unsafe { sobol_dim1_reversed8_avx2(i_rev) };
+    }
+    u8x(|i| sobol_dim1_reversed(i_rev[i]))
+}
+
+/// The four byte lookups of [`sobol_dim1_reversed`] as `vpgatherdd` (same table entries,
+/// so the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn sobol_dim1_reversed8_avx2(i_rev: [u32; LANES]) -> [u32; LANES] {
+    use std::arch::x86_64::*;
+    let t = &SOBOL_DIM1_REV_TABLES;
+    let v = _mm256_loadu_si256(i_rev.as_ptr() as *const __m256i);
+    let ff = _mm256_set1_epi32(0xff);
+    let b0 = _mm256_and_si256(v, ff);
+    let b1 = _mm256_and_si256(_mm256_srli_epi32::<8>(v), ff);
+    let b2 = _mm256_and_si256(_mm256_srli_epi32::<16>(v), ff);
+    let b3 = _mm256_srli_epi32::<24>(v);
+    let g0 = _mm256_i32gather_epi32::<4>(t[0].as_ptr() as *const i32, b0);
+    let g1 = _mm256_i32gather_epi32::<4>(t[1].as_ptr() as *const i32, b1);
+    let g2 = _mm256_i32gather_epi32::<4>(t[2].as_ptr() as *const i32, b2);
+    let g3 = _mm256_i32gather_epi32::<4>(t[3].as_ptr() as *const i32, b3);
+    let r = _mm256_xor_si256(_mm256_xor_si256(g0, g1), _mm256_xor_si256(g2, g3));
+    let mut out = [0u32; LANES];
+    _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, r);
+    out
+}
+
+impl<const AVX2: bool> Sampler8<AVX2> {
     #[inline(always)]
     pub fn new(key: [u32; LANES], index: u32) -> Self {
         Sampler8 { key, index_rev: index.reverse_bits() }
@@ -443,7 +485,7 @@ impl Sampler8 {
         let x = u8x(|i| {
             laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
         });
-        let d1 = u8x(|i| sobol_dim1_reversed(i_rev[i]));
+        let d1 = sobol_dim1_reversed8::<AVX2>(i_rev);
         let y = u8x(|i| laine_karras_permutation(d1[i], hash_combine(seed[i], 1)).reverse_bits());
         (unit8(x), unit8(y))
     }
@@ -467,10 +509,20 @@ mod tests {
     fn sampler8_matches_the_scalar_sampler() {
         let keys: [u32; LANES] = std::array::from_fn(|i| Sampler::pixel_key(i as u32 * 7, 3, 11));
         for index in [0u32, 1, 2, 5, 255, 1 << 20, u32::MAX] {
-            let s8 = Sampler8::new(keys, index);
+            let s8 = Sampler8::<false>::new(keys, index);
+            #[cfg(target_arch = "x86_64")]
+            let avx2 = std::arch::is_x86_feature_detected!("avx2");
+            #[cfg(not(target_arch = "x86_64"))]
+            let avx2 = false;
             for slot in [0u32, 1, 4, 33] {
                 let (x, y) = s8.next_2d(slot);
                 let one = s8.next_1d(slot);
+                if avx2 {
+                    // The gather version (called here outside AVX2 code: correct, just
+                    // not inlined).
+                    let (gx, gy) = Sampler8::<true>::new(keys, index).next_2d(slot);
+                    assert_eq!((gx, gy), (x, y));
+                }
                 for (i, &key) in keys.iter().enumerate() {
                     let mut s = Sampler::from_pixel_key(key, index);
                     s.set_slot(slot);

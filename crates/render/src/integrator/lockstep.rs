@@ -343,8 +343,9 @@ impl LockstepContext<'_> {
 /// Traces sample `index` of the pixels `(x[i], y)` for the lanes set in `lanes`; `key[i]`
 /// is the pixel's [`filtrace_core::sampler::Sampler::pixel_key`]. Lane `i`'s result equals
 /// `Renderer::trace_sample(x[i], y, index)` bit for bit (visible surface at sample 0).
+/// `AVX2 = true` only in code compiled with AVX2 enabled (see [`Sampler8`]).
 #[inline(always)]
-pub fn trace_group(
+pub fn trace_group<const AVX2: bool>(
     lc: &LockstepContext,
     x: &[u32; LANES],
     y: u32,
@@ -356,7 +357,7 @@ pub fn trace_group(
     let ctx = &lc.ctx;
     let params = &lc.params;
     let cam = lc.camera;
-    let sampler = Sampler8::new(*key, index);
+    let sampler = Sampler8::<AVX2>::new(*key, index);
     let mut out = [CameraSample::default(); LANES];
     stats.groups += 1;
     stats.camera_lanes += lanes.count() as u64;

@@ -28,7 +28,7 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{and, bits, from_bits, not, or, per_lane, select, Sampler8, F8, LANES, M8, V8};
+use super::lanes::{bits, from_bits, per_lane, select, Sampler8, F8, LANES, M8, V8};
 use super::path::visible_surface;
 use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
@@ -223,13 +223,13 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8
     for i in lanes_of(plain) {
         s.uv[i] = Vec2::new(b1.0[i], b2.0[i]);
     }
-    let ok_plain = and(plain, not(n.is_zero()));
+    let ok_plain = plain & !n.is_zero();
     for i in lanes_of(scalar_ok) {
         if let Some(si) = &scalar[i] {
             s.set_lane(i, si);
         }
     }
-    or(ok_plain, scalar_ok)
+    ok_plain | scalar_ok
 }
 
 /// `Frame::from_z(n)` in lanes (Duff et al. 2017), as `(x, y)` (`z = n`).
@@ -289,7 +289,7 @@ fn sample_cosine_hemisphere8(ux: F8, uy: F8) -> V8 {
     let ox = F8::splat(2.0) * ux - F8::splat(1.0);
     let oy = F8::splat(2.0) * uy - F8::splat(1.0);
     let zero = F8::splat(0.0);
-    let origin = and(ox.eq(zero), oy.eq(zero));
+    let origin = ox.eq(zero) & oy.eq(zero);
     let first = ox.abs().gt(oy.abs());
     let num = select(first, oy, ox);
     let den = select(first, ox, oy);
@@ -465,7 +465,7 @@ pub fn trace_group<const AVX2: bool>(
             }
             bsdf[i] = Some(b);
         }
-        let glossy = and(act, not(diffuse));
+        let glossy = act & !diffuse;
         let (fx, fy) = frame_from_z(si.n_s);
         let n = si.n_s;
         let wo = to_local(&fx, &fy, &n, si.wo);
@@ -537,10 +537,9 @@ pub fn trace_group<const AVX2: bool>(
             let pdf_a = dist2 / (c * a_area);
             // Lane masks combined with `&` (a `&&` chain in a closure was left out of line,
             // compiled without AVX, 3% of the profile).
-            let front = not(and(not(a_two), cos_l.le(zero)));
-            let ok =
-                and(and(dist2.gt(zero), front), and(not(c.le(zero)), and(pdf_a.gt(zero), pdf_a.is_finite())));
-            let ok = and(area, ok);
+            let front = !(!a_two & cos_l.le(zero));
+            let ok = (dist2.gt(zero) & front) & (!c.le(zero) & (pdf_a.gt(zero) & pdf_a.is_finite()));
+            let ok = area & ok;
             let pdf = pmf * pdf_a;
             ls_ok = M8::select(area, ok, ls_ok);
             ls_wi = V8::select(area, wi, ls_wi);
@@ -548,21 +547,21 @@ pub fn trace_group<const AVX2: bool>(
             ls_dist = select(area, dist, ls_dist);
         }
         let p_l = ls_pdf;
-        let usable = and(and(ls_ok, not(or(p_l.is_nan(), p_l.le(zero)))), not(ls_li.is_zero()));
+        let usable = (ls_ok & !(p_l.is_nan() | p_l.le(zero))) & !ls_li.is_zero();
         let wi_l = to_local(&fx, &fy, &n, ls_wi);
         // Lambert: f = rho / pi above both horizons; times |cos|.
-        let above = and(not(wo.z.le(zero)), not(wi_l.z.le(zero)));
+        let above = !wo.z.le(zero) & !wi_l.z.le(zero);
         let f_d = rho * F8::splat(FRAC_1_PI);
         let mut f = V8::select(above, f_d, V8::default()) * wi_l.z.abs();
         let mut pdf_b = select(above, wi_l.z.max(zero) * F8::splat(FRAC_1_PI), zero);
-        for i in lanes_of(and(glossy, usable)) {
+        for i in lanes_of(glossy & usable) {
             if let Some(b) = &bsdf[i] {
                 let (wo_i, wi_i) = (wo.lane(i), wi_l.lane(i));
                 f.set_lane(i, b.f(wo_i, wi_i) * wi_i.z.abs());
                 pdf_b.0[i] = b.pdf(wo_i, wi_i);
             }
         }
-        let shadow = and(usable, not(f.is_zero()));
+        let shadow = usable & !f.is_zero();
         let s_org = si.offset_origin(ls_wi);
         let far =
             ls_dist.map(|d| if d.is_finite() { d * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY });
@@ -573,7 +572,7 @@ pub fn trace_group<const AVX2: bool>(
             t_max: far.0,
         };
         let occluded = lc.occluded(&srays, shadow);
-        let lit = and(shadow, not(occluded));
+        let lit = shadow & !occluded;
         let w_l = select(ls_delta, F8::splat(1.0), power_heuristic8(p_l, pdf_b));
         let contrib = V8::select(lit, f * ls_li * (w_l / p_l), V8::default());
         // The light reaches the eye over vertices 0..=vertex: component of vertex + 1.
@@ -588,7 +587,7 @@ pub fn trace_group<const AVX2: bool>(
         let mut bs_wi = sample_cosine_hemisphere8(ubx, uby);
         let mut bs_pdf = bs_wi.z.max(zero) * F8::splat(FRAC_1_PI);
         let mut bs_f = f_d;
-        let mut bs_ok = and(not(wo.z.le(zero)), not(bs_pdf.le(zero)));
+        let mut bs_ok = !wo.z.le(zero) & !bs_pdf.le(zero);
         let mut bs_spec = M8::NONE;
         for i in lanes_of(glossy) {
             let sample = bsdf[i]
@@ -605,21 +604,21 @@ pub fn trace_group<const AVX2: bool>(
                 None => bs_ok.set(i, false),
             }
         }
-        let mut cont = and(act, bs_ok);
+        let mut cont = act & bs_ok;
         let wi = to_world(&fx, &fy, &n, bs_wi);
         let new_beta = beta * (bs_f * (bs_wi.z.abs() / bs_pdf));
         beta = V8::select(cont, new_beta, beta);
         p_b = select(cont, bs_pdf, p_b);
         specular = M8::select(cont, bs_spec, specular);
         prev_p = V8::select(cont, si.p, prev_p);
-        cont = and(cont, and(not(beta.is_zero()), beta.is_finite()));
+        cont = cont & (!beta.is_zero() & beta.is_finite());
         let org = si.offset_origin(wi);
 
         // Russian roulette once the path has rr_depth segments.
         if vertex + 2 >= params.rr_depth {
             let q = beta.max_element().min(F8::splat(0.95));
             let u_rr = sampler.next_1d(vertex_slot(vertex) + SLOT_RR);
-            cont = and(cont, not(u_rr.ge(q)));
+            cont = cont & !u_rr.ge(q);
             beta = V8::select(cont, beta / q, beta);
         }
         vertex += 1;
@@ -634,7 +633,7 @@ pub fn trace_group<const AVX2: bool>(
         let hits = lc.intersect(&rays, act);
         // The records of the new vertices replace the old ones in place (no 1 kB copy).
         let found = from_hits(ctx, &wi, &hits, &mut si);
-        let missed = and(act, not(found));
+        let missed = act & !found;
         if ctx.lights.has_environment() {
             for i in lanes_of(missed) {
                 let w = wi.lane(i);
@@ -654,7 +653,7 @@ pub fn trace_group<const AVX2: bool>(
                 }
             }
         }
-        act = and(act, found);
+        act = act & found;
         if !act.any() {
             break;
         }

@@ -84,8 +84,9 @@ const SOBOL_DIM1_BYTES: [[u32; 256]; 4] = byte_tables(SOBOL_DIM1);
 
 /// Byte tables of the map `i_rev -> reverse(sobol_dim1(reverse(i_rev)))` (also linear over
 /// GF(2): column `j` is column `31 - j` of dimension 1, reversed), so that the sampler can
-/// work on bit-reversed indices and skip two reversals.
-const SOBOL_DIM1_REV_BYTES: [[u32; 256]; 4] = {
+/// work on bit-reversed indices and skip two reversals. Public for samplers that look them
+/// up with SIMD gathers (the render crate's 8-lane sampler).
+pub static SOBOL_DIM1_REV_TABLES: [[u32; 256]; 4] = {
     let mut cols = [0u32; 32];
     let mut j = 0;
     while j < 32 {
@@ -95,18 +96,14 @@ const SOBOL_DIM1_REV_BYTES: [[u32; 256]; 4] = {
     byte_tables(cols)
 };
 
-/// The four byte tables of [`sobol_dim1_reversed`] (for samplers that look them up with
-/// SIMD gathers, e.g. the render crate's 8-lane sampler).
-pub static SOBOL_DIM1_REV_TABLES: [[u32; 256]; 4] = SOBOL_DIM1_REV_BYTES;
-
 /// `reverse(sobol_dim1(reverse(i_rev)))` by four table lookups (public for samplers that
 /// evaluate several sample keys at once, e.g. the render crate's 8-lane sampler).
 #[inline]
 pub fn sobol_dim1_reversed(i_rev: u32) -> u32 {
-    SOBOL_DIM1_REV_BYTES[0][(i_rev & 0xff) as usize]
-        ^ SOBOL_DIM1_REV_BYTES[1][((i_rev >> 8) & 0xff) as usize]
-        ^ SOBOL_DIM1_REV_BYTES[2][((i_rev >> 16) & 0xff) as usize]
-        ^ SOBOL_DIM1_REV_BYTES[3][(i_rev >> 24) as usize]
+    SOBOL_DIM1_REV_TABLES[0][(i_rev & 0xff) as usize]
+        ^ SOBOL_DIM1_REV_TABLES[1][((i_rev >> 8) & 0xff) as usize]
+        ^ SOBOL_DIM1_REV_TABLES[2][((i_rev >> 16) & 0xff) as usize]
+        ^ SOBOL_DIM1_REV_TABLES[3][(i_rev >> 24) as usize]
 }
 
 /// Sobol dimension 1 as a 0.32 fixed-point value.

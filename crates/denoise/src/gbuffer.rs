@@ -121,37 +121,10 @@ pub(crate) fn to_planes(im: &Image) -> (Planes3, Buf) {
 
 /// [`to_planes`] into planes of `stride >= width` values per row (padding: 0, invalid).
 pub(crate) fn to_planes_strided(im: &Image, stride: usize) -> (Planes3, Buf) {
-    let (w, h) = (im.width(), im.height());
-    debug_assert!(stride >= w);
-    let n = stride * h;
+    let n = stride * im.height();
     let mut p = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
     let mut valid = Buf::uninit(n);
-    if n == 0 {
-        return (p, valid);
-    }
-    let [p0, p1, p2] = &mut p;
-    // One work item per PAR_CHUNK pixels (whole rows).
-    let rows = (PAR_CHUNK / w.max(1)).max(1);
-    p0.par_chunks_mut(rows * stride)
-        .zip(p1.par_chunks_mut(rows * stride))
-        .zip(p2.par_chunks_mut(rows * stride))
-        .zip(valid.par_chunks_mut(rows * stride))
-        .zip(im.data().par_chunks(3 * w * rows))
-        .for_each(|((((a, b), c), v), src)| {
-            for (r, src) in src.chunks_exact(3 * w).enumerate() {
-                let o = r * stride;
-                for (i, px) in src.chunks_exact(3).enumerate() {
-                    let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                    a[o + i] = if ok { px[0] } else { 0.0 };
-                    b[o + i] = if ok { px[1] } else { 0.0 };
-                    c[o + i] = if ok { px[2] } else { 0.0 };
-                    v[o + i] = if ok { 1.0 } else { 0.0 };
-                }
-                for pl in [&mut *a, &mut *b, &mut *c, &mut *v] {
-                    pl[o + w..o + stride].fill(0.0);
-                }
-            }
-        });
+    split_planes(im, stride, &mut p, Some(&mut valid));
     (p, valid)
 }
 
@@ -159,44 +132,76 @@ pub(crate) fn to_planes_strided(im: &Image, stride: usize) -> (Planes3, Buf) {
 /// case: `None`, and 8 MB less to write and scan at 1080p); when some value is not, the
 /// planes and the validity plane of [`to_planes_strided`].
 pub(crate) fn to_planes_valid(im: &Image, stride: usize) -> (Planes3, Option<Buf>) {
-    let (w, h) = (im.width(), im.height());
-    debug_assert!(stride >= w);
-    let n = stride * h;
+    let n = stride * im.height();
     let mut p = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
-    if n == 0 {
-        return (p, None);
-    }
-    let [p0, p1, p2] = &mut p;
-    let rows = (PAR_CHUNK / w.max(1)).max(1);
-    let any_invalid = p0
-        .par_chunks_mut(rows * stride)
-        .zip(p1.par_chunks_mut(rows * stride))
-        .zip(p2.par_chunks_mut(rows * stride))
-        .zip(im.data().par_chunks(3 * w * rows))
-        .map(|(((a, b), c), src)| {
-            let mut bad = false;
-            for (r, src) in src.chunks_exact(3 * w).enumerate() {
-                let o = r * stride;
-                for (i, px) in src.chunks_exact(3).enumerate() {
-                    let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                    bad |= !ok;
-                    a[o + i] = if ok { px[0] } else { 0.0 };
-                    b[o + i] = if ok { px[1] } else { 0.0 };
-                    c[o + i] = if ok { px[2] } else { 0.0 };
-                }
-                for pl in [&mut *a, &mut *b, &mut *c] {
-                    pl[o + w..o + stride].fill(0.0);
-                }
-            }
-            bad
-        })
-        .reduce(|| false, |a, b| a || b);
-    if any_invalid {
+    if split_planes(im, stride, &mut p, None) {
         let (p, valid) = to_planes_strided(im, stride);
         (p, Some(valid))
     } else {
         (p, None)
     }
+}
+
+/// Writes the planes of `im` (non-finite pixels as 0; rows padded with 0 to `stride`) and,
+/// when given, its validity plane (1 where all three values are finite); returns whether
+/// some pixel was not finite.
+fn split_planes(im: &Image, stride: usize, p: &mut Planes3, valid: Option<&mut Buf>) -> bool {
+    let (w, h) = (im.width(), im.height());
+    debug_assert!(stride >= w);
+    if stride * h == 0 {
+        return false;
+    }
+    let [p0, p1, p2] = p;
+    // One work item per PAR_CHUNK pixels (whole rows).
+    let rows = (PAR_CHUNK / w.max(1)).max(1);
+    let chunk = rows * stride;
+    let items = p0
+        .par_chunks_mut(chunk)
+        .zip(p1.par_chunks_mut(chunk))
+        .zip(p2.par_chunks_mut(chunk))
+        .zip(im.data().par_chunks(3 * w * rows));
+    match valid {
+        Some(valid) => items
+            .zip(valid.par_chunks_mut(chunk))
+            .map(|((((a, b), c), src), v)| split_rows::<true>(src, w, stride, [a, b, c], v))
+            .reduce(|| false, |x, y| x || y),
+        None => items
+            .map(|(((a, b), c), src)| split_rows::<false>(src, w, stride, [a, b, c], &mut []))
+            .reduce(|| false, |x, y| x || y),
+    }
+}
+
+/// [`split_planes`] for the rows of one work item; `v` (the validity rows) is written only
+/// when `VALID` (a constant, so that the loop without it stays as tight as before).
+#[inline(always)]
+fn split_rows<const VALID: bool>(
+    src: &[f32],
+    w: usize,
+    stride: usize,
+    [a, b, c]: [&mut [f32]; 3],
+    v: &mut [f32],
+) -> bool {
+    let mut bad = false;
+    for (r, src) in src.chunks_exact(3 * w).enumerate() {
+        let o = r * stride;
+        for (i, px) in src.chunks_exact(3).enumerate() {
+            let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+            bad |= !ok;
+            a[o + i] = if ok { px[0] } else { 0.0 };
+            b[o + i] = if ok { px[1] } else { 0.0 };
+            c[o + i] = if ok { px[2] } else { 0.0 };
+            if VALID {
+                v[o + i] = if ok { 1.0 } else { 0.0 };
+            }
+        }
+        for pl in [&mut *a, &mut *b, &mut *c] {
+            pl[o + w..o + stride].fill(0.0);
+        }
+        if VALID {
+            v[o + w..o + stride].fill(0.0);
+        }
+    }
+    bad
 }
 
 /// Interleaves three planes into `out` (3 channels, same pixel count).

@@ -28,14 +28,14 @@
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
 use crate::avx2::{any_zero, hit_distance, mixed_signs, sheared_edges};
-use crate::packet::{RayPacket, LANES};
+use crate::packet::{FlatGroup, FlatNode, FlatTri, RayPacket, LANES};
 use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
 use crate::wide::Node8;
 use crate::wide::{CULL_SCALE, FAR_SCALE};
-use crate::{Blas, Corners};
-use filtrace_core::{Aabb, Vec3};
+use crate::Blas;
+use filtrace_core::Vec3;
 
 /// Packet traversal stack depth: each 8-wide level pushes at most seven entries.
 const STACK8: usize = 7 * MAX_DEPTH + 8;
@@ -150,7 +150,7 @@ impl Best8 {
 struct Regs<'a> {
     /// The rays (for the scalar edge fallback).
     rays: &'a RayPacket,
-    /// Lanes to trace: active, valid, and touching the mesh bounds.
+    /// Lanes to trace: active and valid.
     active: u32,
     /// `org[kx], org[ky], org[kz]` and `S_x, S_y, S_z` per lane.
     o: [__m256; 3],
@@ -186,11 +186,11 @@ unsafe fn ld(x: &[f32; LANES]) -> __m256 {
 }
 
 /// Prepares the lanes of `rays` set in `active`, all eight at once, with the decisions of
-/// the single-ray query, lane for lane: `Ray::is_valid`, the bounds check of a flat mesh
-/// (`wide::ray_touches_box`, the same operations) and the watertight permutation and shear
-/// (`WatertightRay::new`, the same selection rules and roundings).
+/// the single-ray query, lane for lane: `Ray::is_valid` and the watertight permutation and
+/// shear (`WatertightRay::new`, the same selection rules and roundings). No bounds check:
+/// the callers test boxes (group boxes of flat meshes, BVH nodes), which only cull.
 #[inline(always)]
-unsafe fn setup<'a>(rays: &'a RayPacket, active: u32, b: &Aabb) -> Regs<'a> {
+unsafe fn setup(rays: &RayPacket, active: u32) -> Regs<'_> {
     let [ox, oy, oz] = [ld(&rays.origin[0]), ld(&rays.origin[1]), ld(&rays.origin[2])];
     let [dx, dy, dz] = [ld(&rays.dir[0]), ld(&rays.dir[1]), ld(&rays.dir[2])];
     let (t_min, t_max) = (ld(&rays.t_min), ld(&rays.t_max));
@@ -206,41 +206,8 @@ unsafe fn setup<'a>(rays: &'a RayPacket, active: u32, b: &Aabb) -> Regs<'a> {
         _mm256_and_ps(finite_o, finite_d),
         _mm256_and_ps(nonzero, _mm256_cmp_ps::<_CMP_ORD_Q>(t_min, t_max)),
     );
-    // `ray_touches_box`: origin inside, or the slab test with the culling slack.
-    let (lo, hi) = (b.min.to_array(), b.max.to_array());
-    let inside = {
-        _mm256_and_ps(
-            _mm256_and_ps(
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(ox, _mm256_set1_ps(lo[0])),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(ox, _mm256_set1_ps(hi[0])),
-                ),
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(oy, _mm256_set1_ps(lo[1])),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(oy, _mm256_set1_ps(hi[1])),
-                ),
-            ),
-            _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(oz, _mm256_set1_ps(lo[2])),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(oz, _mm256_set1_ps(hi[2])),
-            ),
-        )
-    };
     let one = _mm256_set1_ps(1.0);
-    let mut t_near = t_min;
-    let mut t_far = _mm256_max_ps(_mm256_mul_ps(t_max, _mm256_set1_ps(CULL_SCALE)), t_max);
-    for (k, (o, d)) in [(ox, dx), (oy, dy), (oz, dz)].into_iter().enumerate() {
-        let inv = _mm256_div_ps(one, d);
-        let l = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[k]), o), inv);
-        let h = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[k]), o), inv);
-        let pos = _mm256_cmp_ps::<_CMP_GE_OQ>(inv, zero);
-        // `max(a, b)` is `a > b ? a : b` and `min(a, b)` is `a < b ? a : b`: the scalar
-        // test's selections, NaN slabs included.
-        t_near = _mm256_max_ps(_mm256_blendv_ps(h, l, pos), t_near);
-        t_far = _mm256_min_ps(_mm256_blendv_ps(l, h, pos), t_far);
-    }
-    let touch = _mm256_cmp_ps::<_CMP_LE_OQ>(t_near, _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE)));
-    let act = _mm256_and_ps(_mm256_and_ps(valid, lane_mask(active)), _mm256_or_ps(inside, touch));
+    let act = _mm256_and_ps(valid, lane_mask(active));
     // `WatertightRay::new`: `kz` the axis of largest |d| (first on ties), `kx, ky` the
     // next ones, swapped when `d[kz] < 0`; `S_z = 1 / d[kz]`, `S_x = d[kx] S_z`, ...
     let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
@@ -318,25 +285,31 @@ unsafe fn lane_mask(m: u32) -> __m256 {
     _mm256_castsi256_ps(_mm256_cmpeq_epi32(v, bits))
 }
 
-/// Corner `c` of triangle `l` of packet `tri` (`corners` its rows), permuted per lane:
-/// `(v[kx], v[ky], v[kz])`. One permutation: three broadcasts; else the row `[x, y, z, x]`
-/// in both halves and one shuffle per coordinate (instead of two blends: Cornell, packet
+/// Corner `c` of lane `l` of packet `tri`, permuted by the permutation `k` of all lanes:
+/// `(v[kx], v[ky], v[kz])` as three broadcasts (BVH leaves; coherent packets).
+#[inline(always)]
+unsafe fn corner_packet(tri: &Tri4, c: usize, l: usize, k: [usize; 3]) -> [__m256; 3] {
+    let v = &tri.v[c];
+    [_mm256_set1_ps(v[k[0]][l]), _mm256_set1_ps(v[k[1]][l]), _mm256_set1_ps(v[k[2]][l])]
+}
+
+/// Corner `c` of a flat triangle, permuted per lane: `(v[kx], v[ky], v[kz])`. One
+/// permutation (`UNIFORM`, `k`): three broadcasts; else the row `[x, y, z, x]` in both
+/// halves and one shuffle per coordinate (instead of two blends: Cornell, packet
 /// incoherent closest 16.4 -> 19.9, shadow 17.8 -> 23.4 Mrays/CPU-s).
 #[inline(always)]
-unsafe fn corner<const UNIFORM: bool>(
-    tri: &Tri4,
-    corners: &Corners,
+unsafe fn corner_flat<const UNIFORM: bool>(
+    tri: &FlatTri,
     c: usize,
-    l: usize,
     r: &Regs<'_>,
     k: [usize; 3],
 ) -> [__m256; 3] {
+    let row = &tri.rows[c];
     if UNIFORM {
-        let v = &tri.v[c];
-        return [_mm256_set1_ps(v[k[0]][l]), _mm256_set1_ps(v[k[1]][l]), _mm256_set1_ps(v[k[2]][l])];
+        return [_mm256_set1_ps(row[k[0]]), _mm256_set1_ps(row[k[1]]), _mm256_set1_ps(row[k[2]])];
     }
-    // SAFETY: `Corners` rows are 16-byte aligned, 16 bytes each.
-    let row = _mm256_broadcast_ps(unsafe { &*(corners.0[c].as_ptr() as *const __m128) });
+    // SAFETY: `FlatTri` rows are 16-byte aligned, 16 bytes each.
+    let row = _mm256_broadcast_ps(unsafe { &*(row.as_ptr() as *const __m128) });
     [
         _mm256_permutevar_ps(row, r.kidx[0]),
         _mm256_permutevar_ps(row, r.kidx[1]),
@@ -344,23 +317,17 @@ unsafe fn corner<const UNIFORM: bool>(
     ]
 }
 
-/// The watertight test of one triangle against the eight lanes, as `avx2::test8v` per
-/// lane: `(edge, reject, t, u, v)` where `edge` marks lanes with a zero edge function
-/// (their other results are meaningless: the caller redoes them with the scalar test).
-/// `act`: the lanes to test. `EARLY`: `None` when none of them can hit (all outside an
-/// edge).
+/// The watertight test of the triangle with permuted corners `a, b, c` against the eight
+/// lanes, as `avx2::test8v` per lane: `(edge, reject, t, u, v)` where `edge` marks lanes
+/// with a zero edge function (their other results are meaningless: the caller redoes them
+/// with the scalar test). `act`: the lanes to test. `EARLY`: `None` when none of them can
+/// hit (all outside an edge).
 #[inline(always)]
-unsafe fn test_tri<const UNIFORM: bool, const EARLY: bool>(
-    tri: &Tri4,
-    corners: &Corners,
-    l: usize,
+unsafe fn test_tri<const EARLY: bool>(
+    [a, b, c]: [[__m256; 3]; 3],
     r: &Regs<'_>,
     act: __m256,
-    k: [usize; 3],
 ) -> Option<(__m256, __m256, __m256, __m256, __m256)> {
-    let a = corner::<UNIFORM>(tri, corners, 0, l, r, k);
-    let b = corner::<UNIFORM>(tri, corners, 1, l, r, k);
-    let c = corner::<UNIFORM>(tri, corners, 2, l, r, k);
     let (e, z) = sheared_edges(a, b, c, r.o, r.s);
     let edge = _mm256_and_ps(act, any_zero(e));
     // Mixed signs: outside (no lane with a zero edge function gets here; see `test8v`).
@@ -376,46 +343,160 @@ unsafe fn test_tri<const UNIFORM: bool, const EARLY: bool>(
     Some((edge, reject, t, u, v))
 }
 
+/// Per-lane constants of the fused box test of 8 rays against one box, lane for lane
+/// those of `avx2::RayBoxes8::new` (the BVH's conservative slab test: `b * inv - (o * inv
+/// +- e)`); unlike [`Boxes8`] each lane picks its own near and far planes, so the rays
+/// need not share direction signs.
+struct LaneBoxes {
+    inv: [__m256; 3],
+    oinv_near: [__m256; 3],
+    oinv_far: [__m256; 3],
+    /// All ones where `inv < 0` (the near plane is the box's max).
+    neg: [__m256; 3],
+}
+
+impl LaneBoxes {
+    #[inline(always)]
+    unsafe fn new(rays: &RayPacket) -> Self {
+        let sign = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MIN));
+        let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+        let tiny = _mm256_set1_ps(1e-30);
+        let zero = _mm256_setzero_ps();
+        let mut b = Self { inv: [zero; 3], oinv_near: [zero; 3], oinv_far: [zero; 3], neg: [zero; 3] };
+        for k in 0..3 {
+            let (o, d) = (ld(&rays.origin[k]), ld(&rays.dir[k]));
+            // `d` with components below 1e-30 in magnitude replaced by +-1e-30.
+            let small = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(d, abs), tiny);
+            let d = _mm256_blendv_ps(d, _mm256_or_ps(_mm256_and_ps(d, sign), tiny), small);
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
+            let c = _mm256_mul_ps(o, inv);
+            let e = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_and_ps(c, abs), _mm256_set1_ps(1.0 / (1u32 << 21) as f32)),
+                tiny,
+            );
+            b.inv[k] = inv;
+            b.oinv_near[k] = _mm256_add_ps(c, e);
+            b.oinv_far[k] = _mm256_sub_ps(c, e);
+            b.neg[k] = _mm256_cmp_ps::<_CMP_LT_OQ>(inv, zero);
+        }
+        b
+    }
+
+    /// Lanes of `lanes` whose rays touch `bounds` (`[min x, y, z, max x, y, z, ..]`) with
+    /// `t` in `[t_min, t_cull]`.
+    #[inline(always)]
+    unsafe fn touch(&self, bounds: &[f32; 8], t_min: __m256, t_cull: __m256, lanes: __m256) -> u32 {
+        let mut t_near = t_min;
+        let mut t_far = t_cull;
+        for k in 0..3 {
+            let (lo, hi) = (_mm256_set1_ps(bounds[k]), _mm256_set1_ps(bounds[k + 3]));
+            let n = _mm256_fmsub_ps(_mm256_blendv_ps(lo, hi, self.neg[k]), self.inv[k], self.oinv_near[k]);
+            let f = _mm256_fmsub_ps(_mm256_blendv_ps(hi, lo, self.neg[k]), self.inv[k], self.oinv_far[k]);
+            t_near = _mm256_max_ps(n, t_near);
+            t_far = _mm256_min_ps(f, t_far);
+        }
+        let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
+        _mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far), lanes)) as u32
+    }
+}
+
+/// Bit `g` set for each group of `groups` whose box some lane of `act` touches with `t`
+/// in `[t_min, t_cull]`. Branch-free: all boxes are tested before any triangle (a branch
+/// per group on incoherent packets is a coin flip).
+#[inline(always)]
+unsafe fn touched_groups(
+    groups: &[FlatGroup],
+    lb: &LaneBoxes,
+    t_min: __m256,
+    t_cull: __m256,
+    act: __m256,
+) -> u32 {
+    let mut mask = 0u32;
+    for (g, group) in groups.iter().enumerate() {
+        mask |= ((lb.touch(&group.bounds, t_min, t_cull, act) != 0) as u32) << g;
+    }
+    mask
+}
+
+/// Groups of the flat node `n` (bit `i` for slot `i`) whose boxes the ray `o + t d`
+/// touches with `t` in `[t_min, t_cull]`: one 8-wide box test with the arithmetic of
+/// `avx2::box8` (the BVH's conservative fused slab test).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA (inlined into such functions only).
+#[inline(always)]
+pub(crate) unsafe fn flat_node_touch(n: &FlatNode, o: Vec3, d: Vec3, t_min: f32, t_cull: f32) -> u32 {
+    let mut t_near = _mm256_set1_ps(t_min);
+    let mut t_far = _mm256_set1_ps(t_cull);
+    for k in 0..3 {
+        let dk = if d[k].abs() < 1e-30 { 1e-30f32.copysign(d[k]) } else { d[k] };
+        let inv = 1.0 / dk;
+        let c = o[k] * inv;
+        let e = c.abs() * (1.0 / (1u32 << 21) as f32) + 1e-30;
+        // The near plane is the min row for `inv >= 0` (index arithmetic, no branch).
+        let neg = (inv < 0.0) as usize;
+        let (near, far) = (k + 3 * neg, k + 3 - 3 * neg);
+        let inv8 = _mm256_set1_ps(inv);
+        // SAFETY: `FlatNode` is 32-byte aligned and its rows are 32 bytes.
+        let (nb, fb) =
+            unsafe { (_mm256_load_ps(n.bounds[near].as_ptr()), _mm256_load_ps(n.bounds[far].as_ptr())) };
+        t_near = _mm256_max_ps(_mm256_fmsub_ps(nb, inv8, _mm256_set1_ps(c + e)), t_near);
+        t_far = _mm256_min_ps(_mm256_fmsub_ps(fb, inv8, _mm256_set1_ps(c - e)), t_far);
+    }
+    let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
+    _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32
+}
+
 /// Closest hits of the lanes of `rays` set in `active` among all triangles of the flat
 /// `blas` (ids are its `prim_ids` values; on equal `t` the smallest id wins, as in the
-/// single-ray query).
+/// single-ray query). Only the triangles of groups whose (padded) box some lane touches
+/// are tested.
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
-    let r = setup(rays, active as u32, &blas.bounds);
-    if r.active == 0 {
+    let r = setup(rays, active as u32);
+    let lb = LaneBoxes::new(rays);
+    let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
+    if r.active == 0 || groups == 0 {
         return Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     }
     match r.uniform {
-        Some(k) => closest_flat_k::<true>(blas, &r, k),
-        None => closest_flat_k::<false>(blas, &r, [0, 1, 2]),
+        Some(k) => closest_flat_k::<true>(blas, &r, k, groups),
+        None => closest_flat_k::<false>(blas, &r, [0, 1, 2], groups),
     }
 }
 
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn closest_flat_k<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3]) -> Closest8 {
+unsafe fn closest_flat_k<const UNIFORM: bool>(
+    blas: &Blas,
+    r: &Regs<'_>,
+    k: [usize; 3],
+    groups: u32,
+) -> Closest8 {
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     let mut best = Best8::new(r.t_max);
-    for (j, tri) in blas.packets.iter().enumerate() {
-        for l in 0..4 {
-            let id = blas.prim_ids[4 * j + l];
-            if id == u32::MAX {
-                continue;
-            }
+    let mut left = groups;
+    while left != 0 {
+        let g = &blas.flat_groups[left.trailing_zeros() as usize];
+        left &= left - 1;
+        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
+            let corners = [
+                corner_flat::<UNIFORM>(tri, 0, r, k),
+                corner_flat::<UNIFORM>(tri, 1, r, k),
+                corner_flat::<UNIFORM>(tri, 2, r, k),
+            ];
             // Uniform permutations are (almost only) coherent packets: skip divisions.
-            let Some((edge, reject, t, u, v)) =
-                test_tri::<UNIFORM, UNIFORM>(tri, &blas.corners[4 * j + l], l, r, r.act, k)
-            else {
+            let Some((edge, reject, t, u, v)) = test_tri::<UNIFORM>(corners, r, r.act) else {
                 continue;
             };
             if _mm256_movemask_ps(edge) != 0 {
-                best.update_scalar(r.rays, r.active, &mut out, &tri.lane(l), id);
+                best.update_scalar(r.rays, r.active, &mut out, &tri.tri(), tri.id);
                 continue;
             }
-            best.update(t, u, v, reject, r.t_min, r.act, id);
+            best.update(t, u, v, reject, r.t_min, r.act, tri.id);
         }
     }
     best.store(&mut out);
@@ -437,42 +518,48 @@ fn closest_scalar(rays: &RayPacket, active: u32, out: &mut Closest8, tri: &Tri, 
 }
 
 /// Lanes of `rays` set in `active` that hit any triangle of the flat `blas` with `t` in
-/// `[t_min, t_max]` (bit `i` for lane `i`).
+/// `[t_min, t_max]` (bit `i` for lane `i`); only groups whose box some lane touches are
+/// tested.
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
-    let r = setup(rays, active as u32, &blas.bounds);
-    if r.active == 0 {
+    let r = setup(rays, active as u32);
+    let lb = LaneBoxes::new(rays);
+    let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
+    if r.active == 0 || groups == 0 {
         return 0;
     }
     (match r.uniform {
-        Some(k) => occluded_flat_k::<true>(blas, r, k),
-        None => occluded_flat_k::<false>(blas, r, [0, 1, 2]),
+        Some(k) => occluded_flat_k::<true>(blas, r, k, groups),
+        None => occluded_flat_k::<false>(blas, r, [0, 1, 2], groups),
     }) as u8
 }
 
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usize; 3]) -> u32 {
+unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usize; 3], groups: u32) -> u32 {
     // Branch-free per triangle (a lane's hit is found at an unpredictable triangle: a
     // branch on it mispredicted about once per lane); lanes that hit leave `act`, and
-    // the packet stops once per 4-triangle packet when all have.
+    // the packet stops once per group when all have.
     let mut act = r.act;
     let mut occluded = _mm256_setzero_ps();
-    for (j, tri) in blas.packets.iter().enumerate() {
-        for l in 0..4 {
-            if blas.prim_ids[4 * j + l] == u32::MAX {
-                continue;
-            }
-            let Some((edge, reject, t, _, _)) =
-                test_tri::<UNIFORM, false>(tri, &blas.corners[4 * j + l], l, &r, act, k)
-            else {
+    let mut left = groups;
+    while left != 0 {
+        let g = &blas.flat_groups[left.trailing_zeros() as usize];
+        left &= left - 1;
+        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
+            let corners = [
+                corner_flat::<UNIFORM>(tri, 0, &r, k),
+                corner_flat::<UNIFORM>(tri, 1, &r, k),
+                corner_flat::<UNIFORM>(tri, 2, &r, k),
+            ];
+            let Some((edge, reject, t, _, _)) = test_tri::<false>(corners, &r, act) else {
                 continue;
             };
             let hit = if _mm256_movemask_ps(edge) != 0 {
-                lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.lane(l)))
+                lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.tri()))
             } else {
                 let in_range = _mm256_and_ps(
                     _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
@@ -503,10 +590,6 @@ fn any_scalar(rays: &RayPacket, lanes: u32, tri: &Tri) -> u32 {
     }
     hit
 }
-
-/// A box through which every finite ray passes (BVH bottom levels have no bounds check
-/// before the root node; the root node's box test does that).
-const EVERYWHERE: Aabb = Aabb { min: Vec3::splat(f32::NEG_INFINITY), max: Vec3::splat(f32::INFINITY) };
 
 /// Per-lane constants of the fused 8-wide box test, lane for lane those of
 /// `avx2::RayBoxes8::new`; the near/far bound rows are shared, which needs every active
@@ -646,9 +729,6 @@ unsafe fn cull8(t_max: __m256) -> __m256 {
     _mm256_max_ps(_mm256_mul_ps(t_max, _mm256_set1_ps(CULL_SCALE)), t_max)
 }
 
-/// Rows of no triangle (the uniform-permutation triangle test reads the packets).
-static NO_CORNERS: Corners = Corners([[0.0; 4]; 3]);
-
 /// Pushes the children of `node` that some lane of `lanes` touches onto `stack` (the
 /// farthest deepest when `ORDERED`, by the entry distance of each child's lowest lane) and
 /// returns the one to visit next.
@@ -713,7 +793,7 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
     if direction_spread(rays, active as u32) > MAX_SPREAD {
         return None;
     }
-    let r = setup(rays, active as u32, &EVERYWHERE);
+    let r = setup(rays, active as u32);
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     if r.active == 0 || blas.nodes8.is_empty() {
         return Some(out);
@@ -741,9 +821,12 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
                     if id == u32::MAX {
                         continue;
                     }
-                    let Some((edge, reject, t, u, v)) =
-                        test_tri::<true, true>(tri, &NO_CORNERS, l, &r, act, k)
-                    else {
+                    let corners = [
+                        corner_packet(tri, 0, l, k),
+                        corner_packet(tri, 1, l, k),
+                        corner_packet(tri, 2, l, k),
+                    ];
+                    let Some((edge, reject, t, u, v)) = test_tri::<true>(corners, &r, act) else {
                         continue;
                     };
                     if _mm256_movemask_ps(edge) != 0 {
@@ -776,7 +859,7 @@ pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> 
     if direction_spread(rays, active as u32) > MAX_SPREAD {
         return None;
     }
-    let r = setup(rays, active as u32, &EVERYWHERE);
+    let r = setup(rays, active as u32);
     if r.active == 0 || blas.nodes8.is_empty() {
         return Some(0);
     }
@@ -801,9 +884,12 @@ pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> 
                     if blas.prim_ids[4 * j + l] == u32::MAX {
                         continue;
                     }
-                    let Some((edge, reject, t, _, _)) =
-                        test_tri::<true, false>(tri, &NO_CORNERS, l, &r, act, k)
-                    else {
+                    let corners = [
+                        corner_packet(tri, 0, l, k),
+                        corner_packet(tri, 1, l, k),
+                        corner_packet(tri, 2, l, k),
+                    ];
+                    let Some((edge, reject, t, _, _)) = test_tri::<false>(corners, &r, act) else {
                         continue;
                     };
                     let hit = if _mm256_movemask_ps(edge) != 0 {

@@ -151,21 +151,12 @@ struct Blas {
     /// No hierarchy: every query tests all packets, as one leaf
     /// ([`BuildParams::max_flat_triangles`]); `nodes` and `nodes8` are empty.
     flat: bool,
-    /// Flat bottom levels only: the triangle of lane `l` of packet `p` at `4 p + l` as
-    /// one `[x, y, z, x]` row per corner (NaN for unused lanes), from which the 8-ray
-    /// packet kernels pick each ray's permuted axes with one shuffle per coordinate.
-    corners: Vec<Corners>,
-}
-
-/// The three corners of a triangle as 16-byte aligned rows `[x, y, z, x]`.
-#[repr(C, align(16))]
-#[derive(Clone, Copy, Debug)]
-struct Corners([[f32; 4]; 3]);
-
-impl Corners {
-    fn of(tri: &triangle::Tri) -> Self {
-        Self(tri.map(|[x, y, z]| [x, y, z, x]))
-    }
+    /// Flat bottom levels only: the triangles as the 8-ray packet kernels read them,
+    /// grouped (`flat_groups`, boxes tested before the triangles; `packet::flat_layout`).
+    flat_tris: Vec<packet::FlatTri>,
+    flat_groups: Vec<packet::FlatGroup>,
+    /// Flat bottom levels only: the groups of `packets` and their boxes, for single rays.
+    flat_node: packet::FlatNode,
 }
 
 impl Blas {
@@ -226,36 +217,48 @@ impl Blas {
             tri_count: ids.len(),
             bounds: root.bounds(),
             flat: false,
-            corners: Vec::new(),
+            flat_tris: Vec::new(),
+            flat_groups: Vec::new(),
+            flat_node: packet::FlatNode::default(),
         }
     }
 
     /// The flat bottom level of a tiny mesh: triangles `ids` (boxes `boxes`, ids
-    /// ascending) in packets, in id order (see `avx2::closest_in`; largest area first, for
-    /// any-hit queries to meet the likeliest occluders first, was measured to make no
-    /// difference beyond noise on the Cornell box).
+    /// ascending). Single rays: packets in up to eight groups (`flat_node`, ids ascending
+    /// within each group, see `avx2::closest_in`); 8-ray packets: `flat_tris` in groups of
+    /// their own (`packet::flat_layout`). Both only cull by boxes: the hits are those of
+    /// testing every triangle.
     fn build_flat(ids: &[u32], boxes: &[Aabb], tri: impl Fn(usize) -> [Vec3; 3]) -> Self {
-        let order: Vec<usize> = (0..ids.len()).collect();
-        let packets: Vec<Tri4> = order
-            .chunks(4)
-            .map(|c| {
-                Tri4::pack(&c.iter().map(|&k| tri(ids[k] as usize).map(|v| v.to_array())).collect::<Vec<_>>())
-            })
-            .collect();
-        let corners = packets.iter().flat_map(|p| (0..4).map(|l| Corners::of(&p.lane(l)))).collect();
-        let prim_ids = order
-            .chunks(4)
-            .flat_map(|c| (0..4).map(move |l| c.get(l).map_or(u32::MAX, |&k| ids[k])))
-            .collect();
+        let tris: Vec<triangle::Tri> = ids.iter().map(|&i| tri(i as usize).map(|v| v.to_array())).collect();
+        let bounds = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+        let scale = packet::pad_scale(&bounds);
+        let mut flat_node = packet::FlatNode::default();
+        let (mut packets, mut prim_ids) = (Vec::new(), Vec::new());
+        for (g, (b, members)) in packet::flat_node_groups(boxes).iter().enumerate() {
+            let b = packet::pad_box(b, scale);
+            for k in 0..3 {
+                flat_node.bounds[k][g] = b.min[k];
+                flat_node.bounds[k + 3][g] = b.max[k];
+            }
+            flat_node.first[g] = packets.len() as u32;
+            for c in members.chunks(4) {
+                packets.push(Tri4::pack(&c.iter().map(|&k| tris[k]).collect::<Vec<_>>()));
+                prim_ids.extend((0..4).map(|l| c.get(l).map_or(u32::MAX, |&k| ids[k])));
+            }
+            flat_node.count[g] = packets.len() as u32 - flat_node.first[g];
+        }
+        let (flat_tris, flat_groups) = packet::flat_layout(ids, &tris);
         Self {
             nodes: Vec::new(),
             nodes8: Vec::new(),
             packets,
             prim_ids,
             tri_count: ids.len(),
-            bounds: boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union),
+            bounds,
             flat: true,
-            corners,
+            flat_tris,
+            flat_groups,
+            flat_node,
         }
     }
 
@@ -309,6 +312,16 @@ impl Blas {
         t_min: f32,
         t_max: &mut f32,
     ) -> Option<(f32, f32, f32, u32)> {
+        // Flat: the groups whose boxes the ray touches (one 8-wide box test); rays that
+        // touch none (camera rays past a Cornell box) stop here.
+        let mut groups = if self.flat {
+            avx2_packet::flat_node_touch(&self.flat_node, o, d, t_min, wide::cull_bound(*t_max))
+        } else {
+            0
+        };
+        if self.flat && groups == 0 {
+            return None;
+        }
         let wr = WatertightRay::new(o, d);
         let mut leaves = avx2::ClosestPairs {
             packets: &self.packets,
@@ -317,12 +330,12 @@ impl Blas {
             best: None,
         };
         if self.flat {
-            // Rays from outside (camera rays, half of which miss a Cornell box) are culled
-            // by the bounds; rays from inside pay six compares.
-            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.bounds) {
-                return None;
+            while groups != 0 {
+                let g = groups.trailing_zeros() as usize;
+                groups &= groups - 1;
+                let (first, count) = (self.flat_node.first[g], self.flat_node.count[g]);
+                wide::Leaves::visit(&mut &mut leaves, first, count, t_max);
             }
-            wide::Leaves::visit(&mut &mut leaves, 0, self.packets.len() as u32, t_max);
         } else {
             let rb = avx2::RayBoxes8::new(o, d);
             avx2::traverse8::<_, true>(&self.nodes8, &rb, t_min, t_max, &mut leaves);
@@ -353,12 +366,27 @@ impl Blas {
     #[inline]
     /// Safety: the CPU has AVX2 and FMA (`Simd::Avx2.available()`).
     unsafe fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
+        let mut groups = if self.flat {
+            avx2_packet::flat_node_touch(&self.flat_node, o, d, t_min, wide::cull_bound(t_max))
+        } else {
+            0
+        };
+        if self.flat && groups == 0 {
+            return false;
+        }
         let wr = WatertightRay::new(o, d);
         let mut t_max = t_max;
         let mut leaves = avx2::AnyPairs { packets: &self.packets, ray: avx2::Ray8::new(&wr, t_min) };
         if self.flat {
-            return wide::ray_touches_box(o, d, t_min, t_max, &self.bounds)
-                && wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
+            while groups != 0 {
+                let g = groups.trailing_zeros() as usize;
+                groups &= groups - 1;
+                let (first, count) = (self.flat_node.first[g], self.flat_node.count[g]);
+                if wide::Leaves::visit(&mut leaves, first, count, &mut t_max) {
+                    return true;
+                }
+            }
+            return false;
         }
         let rb = avx2::RayBoxes8::new(o, d);
         avx2::traverse8::<_, false>(&self.nodes8, &rb, t_min, &mut t_max, leaves)
@@ -415,7 +443,7 @@ impl Blas {
             self.nodes.iter().flat_map(|n| n.child.into_iter().zip(n.count)).collect();
         leaves.extend(self.nodes8.iter().flat_map(|n| n.child.into_iter().zip(n.count)));
         if self.flat {
-            leaves.push((0, self.packets.len() as u32));
+            leaves.extend(self.flat_node.first.into_iter().zip(self.flat_node.count));
         }
         for (first, count) in leaves.into_iter().filter(|&(_, c)| c > 0) {
             let lanes = &self.prim_ids[4 * first as usize..4 * (first + count) as usize];

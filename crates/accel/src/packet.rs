@@ -26,6 +26,158 @@ const MIN_LANES_CLOSEST: u32 = 4;
 /// 4 lanes 0.91x and 1.09x.
 const MIN_LANES_ANY: u32 = 5;
 
+/// One triangle of a flat bottom level as the 8-ray packet kernels read it: each corner
+/// a 16-byte row `[x, y, z, x]` (a ray's permuted axes are picked from it with one shuffle
+/// per coordinate), and its id (a `prim_ids` value). One cache line.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FlatTri {
+    pub rows: [[f32; 4]; 3],
+    pub id: u32,
+}
+
+impl FlatTri {
+    /// The corners as the scalar watertight test takes them.
+    pub fn tri(&self) -> crate::triangle::Tri {
+        self.rows.map(|[x, y, z, _]| [x, y, z])
+    }
+}
+
+/// A group of [`FlatTri`]s (`first .. first + count`) and a box around them, padded by
+/// [`FLAT_BOX_PAD`] of the mesh's largest coordinate: the 8-ray kernels test the boxes
+/// first and the triangles of touched groups only. `bounds` is `[min x, y, z, max x, y,
+/// z, 0, 0]`.
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FlatGroup {
+    pub bounds: [f32; 8],
+    pub first: u32,
+    pub count: u32,
+}
+
+/// Most groups of a flat bottom level (the kernels keep the touched ones in a `u32`).
+pub(crate) const MAX_FLAT_GROUPS: usize = 32;
+
+/// Padding of the group boxes, relative to the largest coordinate magnitude of the mesh.
+/// Boxes only cull, so any padding keeps the results exact; it makes the culling safe
+/// also against the watertight test's rounding of `t` near a triangle's plane (a hit
+/// reported a few ulps of the scene scale behind the origin would otherwise be culled
+/// by a box test that computes the plane distance exactly): the Cornell box's boxes grow
+/// by half a unit of its 556.
+pub(crate) const FLAT_BOX_PAD: f32 = 1.0 / 1024.0;
+
+/// Cost of one 8-ray box test relative to one 8-ray triangle test, for grouping.
+pub(crate) const FLAT_BOX_COST: f32 = 0.3;
+
+/// The single-ray queries' view of a flat bottom level: its packets fall into up to eight
+/// groups (`first[i] .. first[i] + count[i]`, ids ascending within each), whose padded
+/// boxes are tested as one 8-wide node (`avx2_packet::flat_node_touch`) before their
+/// packets. Rows of `bounds`: min x, y, z, max x, y, z; unused slots have empty boxes.
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FlatNode {
+    pub bounds: [[f32; 8]; 6],
+    pub first: [u32; 8],
+    pub count: [u32; 8],
+}
+
+impl Default for FlatNode {
+    fn default() -> Self {
+        let (inf, ninf) = ([f32::INFINITY; 8], [f32::NEG_INFINITY; 8]);
+        Self { bounds: [inf, inf, inf, ninf, ninf, ninf], first: [0; 8], count: [0; 8] }
+    }
+}
+
+/// Groups of the single-ray layout ([`FlatNode`]): at most eight, clustered for a cost of
+/// one 8-triangle test per eight triangles of each group touched.
+pub(crate) fn flat_node_groups(boxes: &[filtrace_core::Aabb]) -> Vec<(filtrace_core::Aabb, Vec<usize>)> {
+    cluster(boxes, 8, |p, n| p * n.div_ceil(8) as f32)
+}
+
+/// `b` grown by [`FLAT_BOX_PAD`] of `scale` on every side.
+pub(crate) fn pad_box(b: &filtrace_core::Aabb, scale: f32) -> filtrace_core::Aabb {
+    let pad = filtrace_core::Vec3::splat(scale * FLAT_BOX_PAD);
+    filtrace_core::Aabb { min: b.min - pad, max: b.max + pad }
+}
+
+/// The largest coordinate magnitude of `b` (the scale of [`FLAT_BOX_PAD`]).
+pub(crate) fn pad_scale(b: &filtrace_core::Aabb) -> f32 {
+    b.min.abs().max(b.max.abs()).max_element()
+}
+
+/// Agglomerative clustering of `boxes` by the surface area heuristic (Walter et al. 2008,
+/// "Fast agglomerative clustering for rendering"; exhaustive, for the few triangles of a
+/// flat bottom level): starting from one group per box, merges the pair of groups whose
+/// merge lowers `sum over groups cost(area_g / area_root, n_g)` most, until no merge
+/// lowers it and at most `max_groups` remain. Groups hold indices into `boxes`,
+/// ascending, and come in the order of their smallest index.
+pub(crate) fn cluster(
+    boxes: &[filtrace_core::Aabb],
+    max_groups: usize,
+    cost: impl Fn(f32, usize) -> f32,
+) -> Vec<(filtrace_core::Aabb, Vec<usize>)> {
+    use filtrace_core::Aabb;
+    let root = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+    let root_area = root.surface_area().max(f32::MIN_POSITIVE);
+    let sah = |b: &Aabb, n: usize| cost(b.surface_area() / root_area, n);
+    let mut groups: Vec<(Aabb, Vec<usize>)> = boxes.iter().enumerate().map(|(i, b)| (*b, vec![i])).collect();
+    while groups.len() > 1 {
+        let mut best: Option<(f32, usize, usize)> = None;
+        for i in 0..groups.len() {
+            for j in i + 1..groups.len() {
+                let (a, b) = (&groups[i], &groups[j]);
+                let merged = sah(&a.0.union(b.0), a.1.len() + b.1.len());
+                let delta = merged - sah(&a.0, a.1.len()) - sah(&b.0, b.1.len());
+                if best.is_none_or(|(d, _, _)| delta < d) {
+                    best = Some((delta, i, j));
+                }
+            }
+        }
+        let Some((delta, i, j)) = best else { break };
+        if delta >= 0.0 && groups.len() <= max_groups {
+            break;
+        }
+        let (b, mut members) = groups.swap_remove(j);
+        groups[i].0 = groups[i].0.union(b);
+        groups[i].1.append(&mut members);
+    }
+    for g in &mut groups {
+        g.1.sort_unstable();
+    }
+    groups.sort_unstable_by_key(|g| g.1[0]);
+    groups
+}
+
+/// Groups the triangles `tris` (ids `ids`, in id order) of a flat bottom level for the
+/// 8-ray packet kernels: agglomerative clustering by the surface area heuristic
+/// (Walter et al. 2008, "Fast agglomerative clustering for rendering"; exhaustive here,
+/// `n <= max_flat_triangles`), merging the pair of groups whose merge lowers
+/// `sum over groups (FLAT_BOX_COST + n_g area_g / area_root)` most, until no merge
+/// lowers it (and at most [`MAX_FLAT_GROUPS`] remain). The two triangles of a quad share
+/// a box and merge first; walls, blocks and the light of the Cornell box stay apart.
+/// Groups are stored in the order of their smallest id, triangles in id order.
+pub(crate) fn flat_layout(ids: &[u32], tris: &[crate::triangle::Tri]) -> (Vec<FlatTri>, Vec<FlatGroup>) {
+    use filtrace_core::{Aabb, Vec3};
+    let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t.map(Vec3::from_array))).collect();
+    let root = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+    let groups = cluster(&boxes, MAX_FLAT_GROUPS, |p, n| FLAT_BOX_COST + p * n as f32);
+    let scale = pad_scale(&root);
+    let mut flat = Vec::with_capacity(tris.len());
+    let mut out = Vec::with_capacity(groups.len());
+    for (b, members) in &groups {
+        let Aabb { min: lo, max: hi } = pad_box(b, scale);
+        out.push(FlatGroup {
+            bounds: [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, 0.0, 0.0],
+            first: flat.len() as u32,
+            count: members.len() as u32,
+        });
+        flat.extend(
+            members.iter().map(|&k| FlatTri { rows: tris[k].map(|[x, y, z]| [x, y, z, x]), id: ids[k] }),
+        );
+    }
+    (flat, out)
+}
+
 /// 8 rays, structure of arrays. Lane i is the ray (`origin[*][i]`, `dir[*][i]`, `t_min[i]`, `t_max[i]`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RayPacket {
@@ -326,5 +478,64 @@ mod tests {
             assert_eq!(occ & (1 << i) != 0, active && accel.occluded(&p.lane(i)));
         }
         assert_ne!(h.mask, 0);
+    }
+}
+
+#[cfg(test)]
+mod flat_tests {
+    use super::*;
+    use crate::triangle::Tri;
+
+    fn cornell() -> (Vec<u32>, Vec<Tri>) {
+        let scene = filtrace_scene::builtin("cornell").expect("cornell");
+        let tris: Vec<Tri> = scene
+            .instances
+            .iter()
+            .flat_map(|i| {
+                let m = &scene.meshes[i.mesh as usize];
+                (0..m.triangle_count()).map(move |p| m.triangle(p).map(|v| v.to_array()))
+            })
+            .collect();
+        ((0..tris.len() as u32).collect(), tris)
+    }
+
+    /// Every triangle lands in exactly one group whose padded box holds it; groups hold
+    /// ascending ids.
+    #[test]
+    fn flat_layout_partitions_the_cornell_box() {
+        let (ids, tris) = cornell();
+        let (flat, groups) = flat_layout(&ids, &tris);
+        assert_eq!(flat.len(), tris.len());
+        assert!(groups.len() > 4 && groups.len() <= MAX_FLAT_GROUPS, "{} groups", groups.len());
+        let mut seen = vec![0; tris.len()];
+        let mut next = 0;
+        for g in &groups {
+            assert_eq!(g.first, next);
+            next += g.count;
+            let members = &flat[g.first as usize..(g.first + g.count) as usize];
+            assert!(members.windows(2).all(|w| w[0].id < w[1].id));
+            for t in members {
+                seen[t.id as usize] += 1;
+                assert_eq!(t.tri(), tris[t.id as usize]);
+                for p in t.tri() {
+                    for k in 0..3 {
+                        assert!(g.bounds[k] < p[k] && p[k] < g.bounds[k + 3], "{p:?} outside {:?}", g.bounds);
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1));
+        let sizes: Vec<u32> = groups.iter().map(|g| g.count).collect();
+        println!("cornell groups: {sizes:?}");
+        let boxes: Vec<_> = tris
+            .iter()
+            .map(|t| filtrace_core::Aabb::from_points(t.map(filtrace_core::Vec3::from_array)))
+            .collect();
+        let node = flat_node_groups(&boxes);
+        assert!(node.len() <= 8);
+        let mut ids: Vec<usize> = node.iter().flat_map(|g| g.1.iter().copied()).collect();
+        ids.sort_unstable();
+        assert_eq!(ids, (0..tris.len()).collect::<Vec<_>>());
+        println!("single-ray groups: {:?}", node.iter().map(|g| &g.1).collect::<Vec<_>>());
     }
 }

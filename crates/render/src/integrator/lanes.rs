@@ -10,54 +10,134 @@
 //! `v * (1 / length)`) and the helpers of `filtrace_core::sampling` term by term; the
 //! lockstep identity test (`tests/lockstep.rs`) fails for any deviation.
 //!
-//! Everything is `#[inline(always)]` loops over `[_; 8]` so that, inlined into a function
-//! compiled for AVX2 ([`super::lockstep`]), each loop becomes one or two ymm instructions.
+//! **Two instruction sets, one source.** The lane types carry the const parameter `A`
+//! (the `AVX2` of the tile loop). On x86-64 their storage is one `__m256` value (a ymm
+//! register when LLVM can keep it there; `[f32; 8]` arrays were kept in stack slots and
+//! every lane operation was a load, the operation and a store). With `A = true`, which is
+//! only instantiated inside the tile loop compiled with `#[target_feature(enable =
+//! "avx2,fma")]` after runtime detection, every operation is the AVX intrinsic of the same
+//! IEEE operation (`vaddps`, `vcmpps`, `vblendvps`, ...); with `A = false` (the portable
+//! build) it is the plain per-lane loop over the array view of the value, so the portable
+//! build never executes an AVX instruction. Everything is `#[inline(always)]` free
+//! functions or methods (a closure or an out-of-line helper does not inherit the AVX2
+//! target feature of its caller and would compile to SSE or to a call per operation).
 
 use filtrace_core::sampler::{
     hash_combine, hash_u32, laine_karras_permutation, sobol_dim1_reversed, SOBOL_DIM1_REV_TABLES,
 };
 use filtrace_core::Vec3;
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Number of lanes (paths traced in lockstep).
 pub const LANES: usize = 8;
 
-/// Eight `f32` lanes.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[repr(align(32))]
-pub struct F8(pub [f32; LANES]);
+/// Storage of eight 32-bit lanes: one `__m256` on x86-64.
+#[cfg(target_arch = "x86_64")]
+type Raw = __m256;
+/// Storage of eight 32-bit lanes.
+#[cfg(not(target_arch = "x86_64"))]
+type Raw = [f32; LANES];
 
-/// Eight lane masks as `-1` (set) / `0` (clear) integer lanes: a comparison of two [`F8`]
-/// is one `vcmpps`, `&`/`|`/`!` one integer instruction each, a [`select`] one `vblendvps`
-/// (the earlier `[bool; 8]` masks packed and unpacked bytes around every operation: 3-6
-/// instructions per lane op, the largest item of the lane code's instruction count).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(align(32))]
-pub struct M8(pub [i32; LANES]);
+#[inline(always)]
+fn raw_from_f(a: [f32; LANES]) -> Raw {
+    // SAFETY: both types are 32 plain bytes; every bit pattern is valid.
+    unsafe { std::mem::transmute::<[f32; LANES], Raw>(a) }
+}
+#[inline(always)]
+fn raw_to_f(r: Raw) -> [f32; LANES] {
+    // SAFETY: as above.
+    unsafe { std::mem::transmute::<Raw, [f32; LANES]>(r) }
+}
+#[inline(always)]
+fn raw_from_i(a: [i32; LANES]) -> Raw {
+    // SAFETY: as above.
+    unsafe { std::mem::transmute::<[i32; LANES], Raw>(a) }
+}
+#[inline(always)]
+fn raw_to_i(r: Raw) -> [i32; LANES] {
+    // SAFETY: as above.
+    unsafe { std::mem::transmute::<Raw, [i32; LANES]>(r) }
+}
 
-impl M8 {
+/// `if A { avx } else { portable }`: the first expression (AVX/AVX2 intrinsics) only when
+/// `A`, which callers instantiate only inside code compiled for AVX2 + FMA after runtime
+/// detection ([`crate::renderer`]'s `render_tile_lockstep_avx2`).
+macro_rules! avx_or {
+    ($a:expr, $avx:expr, $portable:expr) => {{
+        #[cfg(target_arch = "x86_64")]
+        if $a {
+            // SAFETY: `A = true` is only instantiated in the AVX2 tile loop, which runs
+            // after `is_x86_feature_detected!("avx2")` and `("fma")`.
+            #[allow(unused_unsafe)]
+            return unsafe { $avx };
+        }
+        $portable
+    }};
+}
+
+/// Eight `f32` lanes (`A`: AVX2 instructions, see the module documentation).
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct F8<const A: bool>(Raw);
+
+/// Eight lane masks as `-1` (set) / `0` (clear) 32-bit lanes: a comparison of two [`F8`]
+/// is one `vcmpps`, `&`/`|`/`!` one instruction each, a [`select`] one `vblendvps`.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct M8<const A: bool>(Raw);
+
+impl<const A: bool> Default for F8<A> {
+    #[inline(always)]
+    fn default() -> Self {
+        F8::splat(0.0)
+    }
+}
+impl<const A: bool> Default for M8<A> {
+    #[inline(always)]
+    fn default() -> Self {
+        M8::none()
+    }
+}
+impl<const A: bool> PartialEq for F8<A> {
+    fn eq(&self, o: &Self) -> bool {
+        self.to_array() == o.to_array()
+    }
+}
+impl<const A: bool> PartialEq for M8<A> {
+    fn eq(&self, o: &Self) -> bool {
+        raw_to_i(self.0) == raw_to_i(o.0)
+    }
+}
+
+impl<const A: bool> M8<A> {
     /// No lane set.
-    pub const NONE: M8 = M8([0; LANES]);
-
+    #[inline(always)]
+    pub fn none() -> M8<A> {
+        avx_or!(A, M8(_mm256_setzero_ps()), M8(raw_from_i([0; LANES])))
+    }
     /// Lane `i` of a `bool` array.
     #[inline(always)]
-    pub fn from_array(b: [bool; LANES]) -> M8 {
-        M8(per_lane(|i| -(b[i] as i32)))
+    pub fn from_array(b: [bool; LANES]) -> M8<A> {
+        M8(raw_from_i(per_lane(|i| -(b[i] as i32))))
     }
     /// Lane `i`.
     #[inline(always)]
     pub fn get(&self, i: usize) -> bool {
-        self.0[i] != 0
+        (bits(*self) >> i) & 1 != 0
     }
-    /// Sets lane `i` to `b`.
+    /// Sets lane `i` to `b` (through memory: for per-lane fallbacks only).
     #[inline(always)]
     pub fn set(&mut self, i: usize, b: bool) {
-        self.0[i] = -(b as i32);
+        let mut a = raw_to_i(self.0);
+        a[i] = m(b);
+        self.0 = raw_from_i(a);
     }
     /// `m ? a : b` per lane.
     #[inline(always)]
-    pub fn select(m: M8, a: M8, b: M8) -> M8 {
-        (m & a) | (!m & b)
+    pub fn select(m: M8<A>, a: M8<A>, b: M8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_blendv_ps(b.0, a.0, m.0)), (m & a) | (!m & b))
     }
     /// Any lane set.
     #[inline(always)]
@@ -73,25 +153,34 @@ impl M8 {
 
 /// Lane-wise `a && b`, written `a & b`: a short-circuit `&&` on lane values became
 /// branches, not one vector instruction (cachegrind counted 340 instructions per bounce).
-impl BitAnd for M8 {
-    type Output = M8;
+impl<const A: bool> BitAnd for M8<A> {
+    type Output = M8<A>;
     #[inline(always)]
-    fn bitand(self, o: M8) -> M8 {
-        M8(per_lane(|i| self.0[i] & o.0[i]))
+    fn bitand(self, o: M8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_and_ps(self.0, o.0)), {
+            let (a, b) = (raw_to_i(self.0), raw_to_i(o.0));
+            M8(raw_from_i(per_lane(|i| a[i] & b[i])))
+        })
     }
 }
-impl BitOr for M8 {
-    type Output = M8;
+impl<const A: bool> BitOr for M8<A> {
+    type Output = M8<A>;
     #[inline(always)]
-    fn bitor(self, o: M8) -> M8 {
-        M8(per_lane(|i| self.0[i] | o.0[i]))
+    fn bitor(self, o: M8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_or_ps(self.0, o.0)), {
+            let (a, b) = (raw_to_i(self.0), raw_to_i(o.0));
+            M8(raw_from_i(per_lane(|i| a[i] | b[i])))
+        })
     }
 }
-impl Not for M8 {
-    type Output = M8;
+impl<const A: bool> Not for M8<A> {
+    type Output = M8<A>;
     #[inline(always)]
-    fn not(self) -> M8 {
-        M8(per_lane(|i| !self.0[i]))
+    fn not(self) -> M8<A> {
+        avx_or!(A, M8(_mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(-1)))), {
+            let a = raw_to_i(self.0);
+            M8(raw_from_i(per_lane(|i| !a[i])))
+        })
     }
 }
 
@@ -112,267 +201,354 @@ pub fn per_lane<T: Copy + Default>(f: impl Fn(usize) -> T) -> [T; LANES] {
     r
 }
 
+/// Lane-wise `f(a, b)` on the array views (portable build).
 #[inline(always)]
-fn zip(a: F8, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
-    F8(per_lane(|i| f(a.0[i], b.0[i])))
+fn zip<const A: bool>(a: F8<A>, b: F8<A>, f: impl Fn(f32, f32) -> f32) -> F8<A> {
+    let (a, b) = (a.to_array(), b.to_array());
+    F8::from_array(per_lane(|i| f(a[i], b[i])))
 }
 
-impl F8 {
+/// Lane-wise comparison on the array views (portable build).
+#[inline(always)]
+fn cmp<const A: bool>(a: F8<A>, b: F8<A>, f: impl Fn(f32, f32) -> bool) -> M8<A> {
+    let (a, b) = (a.to_array(), b.to_array());
+    M8(raw_from_i(per_lane(|i| m(f(a[i], b[i])))))
+}
+
+impl<const A: bool> F8<A> {
     #[inline(always)]
-    pub fn splat(v: f32) -> F8 {
-        F8([v; LANES])
+    pub fn splat(v: f32) -> F8<A> {
+        avx_or!(A, F8(_mm256_set1_ps(v)), F8(raw_from_f([v; LANES])))
+    }
+    /// The lanes of an array.
+    #[inline(always)]
+    pub fn from_array(a: [f32; LANES]) -> F8<A> {
+        F8(raw_from_f(a))
+    }
+    /// The lanes as an array.
+    #[inline(always)]
+    pub fn to_array(self) -> [f32; LANES] {
+        raw_to_f(self.0)
+    }
+    /// Lane `i`.
+    #[inline(always)]
+    pub fn lane(self, i: usize) -> f32 {
+        self.to_array()[i]
+    }
+    /// Sets lane `i` (through memory: for per-lane fallbacks only).
+    #[inline(always)]
+    pub fn set_lane(&mut self, i: usize, v: f32) {
+        let mut a = self.to_array();
+        a[i] = v;
+        *self = F8::from_array(a);
+    }
+    /// Lane-wise `f` on the array view (not for hot code: no vector instruction).
+    #[inline(always)]
+    pub fn map(self, f: impl Fn(f32) -> f32) -> F8<A> {
+        let a = self.to_array();
+        F8::from_array(per_lane(|i| f(a[i])))
+    }
+    /// `f32::min` (LLVM's `minnum` lowering on x86: `isnan(self) ? o : (o < self ? o : self)`).
+    #[inline(always)]
+    pub fn min(self, o: F8<A>) -> F8<A> {
+        avx_or!(
+            A,
+            F8(_mm256_blendv_ps(
+                _mm256_min_ps(o.0, self.0),
+                o.0,
+                _mm256_cmp_ps::<_CMP_UNORD_Q>(self.0, self.0)
+            )),
+            zip(self, o, f32::min)
+        )
+    }
+    /// `f32::max` (as [`F8::min`]).
+    #[inline(always)]
+    pub fn max(self, o: F8<A>) -> F8<A> {
+        avx_or!(
+            A,
+            F8(_mm256_blendv_ps(
+                _mm256_max_ps(o.0, self.0),
+                o.0,
+                _mm256_cmp_ps::<_CMP_UNORD_Q>(self.0, self.0)
+            )),
+            zip(self, o, f32::max)
+        )
+    }
+    /// `f32::abs` (clears the sign bit).
+    #[inline(always)]
+    pub fn abs(self) -> F8<A> {
+        avx_or!(
+            A,
+            F8(_mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX)))),
+            self.map(f32::abs)
+        )
     }
     #[inline(always)]
-    pub fn map(self, f: impl Fn(f32) -> f32) -> F8 {
-        F8(per_lane(|i| f(self.0[i])))
+    pub fn sqrt(self) -> F8<A> {
+        avx_or!(A, F8(_mm256_sqrt_ps(self.0)), self.map(f32::sqrt))
     }
+    /// `1.0f32.copysign(self)` per lane.
     #[inline(always)]
-    pub fn min(self, o: F8) -> F8 {
-        zip(self, o, f32::min)
-    }
-    #[inline(always)]
-    pub fn max(self, o: F8) -> F8 {
-        zip(self, o, f32::max)
-    }
-    #[inline(always)]
-    pub fn abs(self) -> F8 {
-        self.map(f32::abs)
-    }
-    #[inline(always)]
-    pub fn sqrt(self) -> F8 {
-        self.map(f32::sqrt)
+    pub fn one_with_sign(self) -> F8<A> {
+        avx_or!(
+            A,
+            F8(_mm256_or_ps(_mm256_and_ps(self.0, _mm256_set1_ps(-0.0)), _mm256_set1_ps(1.0))),
+            self.map(|z| 1.0f32.copysign(z))
+        )
     }
     /// Lane-wise `self > o`.
     #[inline(always)]
-    pub fn gt(self, o: F8) -> M8 {
-        M8(per_lane(|i| m(self.0[i] > o.0[i])))
+    pub fn gt(self, o: F8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0)), cmp(self, o, |a, b| a > b))
     }
     /// Lane-wise `self < o`.
     #[inline(always)]
-    pub fn lt(self, o: F8) -> M8 {
-        M8(per_lane(|i| m(self.0[i] < o.0[i])))
+    pub fn lt(self, o: F8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0)), cmp(self, o, |a, b| a < b))
     }
     /// Lane-wise `self <= o`.
     #[inline(always)]
-    pub fn le(self, o: F8) -> M8 {
-        M8(per_lane(|i| m(self.0[i] <= o.0[i])))
-    }
-    /// Lane-wise `is_finite`.
-    #[inline(always)]
-    pub fn is_finite(self) -> M8 {
-        M8(per_lane(|i| m(self.0[i].is_finite())))
-    }
-    /// Lane-wise `is_infinite`.
-    #[inline(always)]
-    pub fn is_infinite(self) -> M8 {
-        M8(per_lane(|i| m(self.0[i].is_infinite())))
-    }
-    /// Lane-wise `is_nan`.
-    #[inline(always)]
-    pub fn is_nan(self) -> M8 {
-        M8(per_lane(|i| m(self.0[i].is_nan())))
+    pub fn le(self, o: F8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_LE_OQ>(self.0, o.0)), cmp(self, o, |a, b| a <= b))
     }
     /// Lane-wise `self >= o`.
     #[inline(always)]
-    pub fn ge(self, o: F8) -> M8 {
-        M8(per_lane(|i| m(self.0[i] >= o.0[i])))
+    pub fn ge(self, o: F8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_GE_OQ>(self.0, o.0)), cmp(self, o, |a, b| a >= b))
     }
     /// Lane-wise `self == o`.
     #[inline(always)]
-    pub fn eq(self, o: F8) -> M8 {
-        M8(per_lane(|i| m(self.0[i] == o.0[i])))
+    pub fn eq(self, o: F8<A>) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, o.0)), cmp(self, o, |a, b| a == b))
+    }
+    /// Lane-wise `is_finite` (`|x| < inf`, false for NaN).
+    #[inline(always)]
+    pub fn is_finite(self) -> M8<A> {
+        self.abs().lt(F8::splat(f32::INFINITY))
+    }
+    /// Lane-wise `is_infinite` (`|x| == inf`).
+    #[inline(always)]
+    pub fn is_infinite(self) -> M8<A> {
+        self.abs().eq(F8::splat(f32::INFINITY))
+    }
+    /// Lane-wise `is_nan`.
+    #[inline(always)]
+    pub fn is_nan(self) -> M8<A> {
+        avx_or!(A, M8(_mm256_cmp_ps::<_CMP_UNORD_Q>(self.0, self.0)), cmp(self, self, |a, _| a.is_nan()))
     }
 }
 
 /// `m ? a : b` per lane.
 #[inline(always)]
-pub fn select(m: M8, a: F8, b: F8) -> F8 {
-    F8(per_lane(|i| if m.0[i] < 0 { a.0[i] } else { b.0[i] }))
+pub fn select<const A: bool>(m: M8<A>, a: F8<A>, b: F8<A>) -> F8<A> {
+    avx_or!(A, F8(_mm256_blendv_ps(b.0, a.0, m.0)), {
+        let (mm, a, b) = (raw_to_i(m.0), a.to_array(), b.to_array());
+        F8::from_array(per_lane(|i| if mm[i] < 0 { a[i] } else { b[i] }))
+    })
 }
 
 /// The mask as bits (bit `i` = lane `i`).
 #[inline(always)]
-pub fn bits(m: M8) -> u8 {
-    // Two `movmskps` (SSE, baseline on x86-64, so also in the portable build): LLVM does
-    // not recognise the shift-and-or loop below as a movemask (~20 instructions).
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_castsi128_ps, _mm_load_si128, _mm_movemask_ps};
-        let p = m.0.as_ptr() as *const std::arch::x86_64::__m128i;
-        // SAFETY: SSE2 is part of the x86-64 baseline; `M8` is 32-byte aligned, so both
-        // 16-byte halves are aligned and in bounds.
-        unsafe {
-            let lo = _mm_movemask_ps(_mm_castsi128_ps(_mm_load_si128(p)));
-            let hi = _mm_movemask_ps(_mm_castsi128_ps(_mm_load_si128(p.add(1))));
-            ((hi << 4) | lo) as u8
+pub fn bits<const A: bool>(m: M8<A>) -> u8 {
+    avx_or!(A, _mm256_movemask_ps(m.0) as u8, {
+        // Two `movmskps` (SSE, baseline on x86-64, so also in the portable build): LLVM
+        // does not recognise the shift-and-or loop below as a movemask (~20 instructions).
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: SSE is part of the x86-64 baseline; `[__m128; 2]` and `__m256` are
+            // both 32 plain bytes.
+            unsafe {
+                let [lo, hi] = std::mem::transmute::<Raw, [__m128; 2]>(m.0);
+                ((_mm_movemask_ps(hi) << 4) | _mm_movemask_ps(lo)) as u8
+            }
         }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let mut b = 0u32;
-        for i in 0..LANES {
-            b |= ((m.0[i] as u32) >> 31) << i;
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let a = raw_to_i(m.0);
+            let mut b = 0u32;
+            for (i, x) in a.iter().enumerate() {
+                b |= ((*x as u32) >> 31) << i;
+            }
+            b as u8
         }
-        b as u8
-    }
+    })
 }
 
 /// The bits as a mask.
 #[inline(always)]
-pub fn from_bits(b: u8) -> M8 {
-    M8(per_lane(|i| -(((b >> i) & 1) as i32)))
+pub fn from_bits<const A: bool>(b: u8) -> M8<A> {
+    avx_or!(
+        A,
+        {
+            let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            let v = _mm256_and_si256(_mm256_set1_epi32(b as i32), lane_bit);
+            M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(v, lane_bit)))
+        },
+        M8(raw_from_i(per_lane(|i| -(((b >> i) & 1) as i32))))
+    )
 }
 
-impl Add for F8 {
-    type Output = F8;
+impl<const A: bool> Add for F8<A> {
+    type Output = F8<A>;
     #[inline(always)]
-    fn add(self, o: F8) -> F8 {
-        zip(self, o, |a, b| a + b)
+    fn add(self, o: F8<A>) -> F8<A> {
+        avx_or!(A, F8(_mm256_add_ps(self.0, o.0)), zip(self, o, |a, b| a + b))
     }
 }
-impl Sub for F8 {
-    type Output = F8;
+impl<const A: bool> Sub for F8<A> {
+    type Output = F8<A>;
     #[inline(always)]
-    fn sub(self, o: F8) -> F8 {
-        zip(self, o, |a, b| a - b)
+    fn sub(self, o: F8<A>) -> F8<A> {
+        avx_or!(A, F8(_mm256_sub_ps(self.0, o.0)), zip(self, o, |a, b| a - b))
     }
 }
-impl Mul for F8 {
-    type Output = F8;
+impl<const A: bool> Mul for F8<A> {
+    type Output = F8<A>;
     #[inline(always)]
-    fn mul(self, o: F8) -> F8 {
-        zip(self, o, |a, b| a * b)
+    fn mul(self, o: F8<A>) -> F8<A> {
+        avx_or!(A, F8(_mm256_mul_ps(self.0, o.0)), zip(self, o, |a, b| a * b))
     }
 }
-impl Div for F8 {
-    type Output = F8;
+impl<const A: bool> Div for F8<A> {
+    type Output = F8<A>;
     #[inline(always)]
-    fn div(self, o: F8) -> F8 {
-        zip(self, o, |a, b| a / b)
+    fn div(self, o: F8<A>) -> F8<A> {
+        avx_or!(A, F8(_mm256_div_ps(self.0, o.0)), zip(self, o, |a, b| a / b))
     }
 }
-impl Neg for F8 {
-    type Output = F8;
+/// Flips the sign bit (as `-x`).
+impl<const A: bool> Neg for F8<A> {
+    type Output = F8<A>;
     #[inline(always)]
-    fn neg(self) -> F8 {
-        self.map(|a| -a)
+    fn neg(self) -> F8<A> {
+        avx_or!(A, F8(_mm256_xor_ps(self.0, _mm256_set1_ps(-0.0))), self.map(|a| -a))
     }
 }
 
 /// Eight 3-vectors, structure of arrays.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct V8 {
-    pub x: F8,
-    pub y: F8,
-    pub z: F8,
+pub struct V8<const A: bool> {
+    pub x: F8<A>,
+    pub y: F8<A>,
+    pub z: F8<A>,
 }
 
-impl V8 {
+impl<const A: bool> V8<A> {
     #[inline(always)]
-    pub fn new(x: F8, y: F8, z: F8) -> V8 {
+    pub fn new(x: F8<A>, y: F8<A>, z: F8<A>) -> V8<A> {
         V8 { x, y, z }
     }
     #[inline(always)]
-    pub fn splat(v: Vec3) -> V8 {
+    pub fn splat(v: Vec3) -> V8<A> {
         V8 { x: F8::splat(v.x), y: F8::splat(v.y), z: F8::splat(v.z) }
+    }
+    /// From three coordinate arrays.
+    #[inline(always)]
+    pub fn from_arrays(a: &[[f32; LANES]; 3]) -> V8<A> {
+        V8::new(F8::from_array(a[0]), F8::from_array(a[1]), F8::from_array(a[2]))
+    }
+    /// The three coordinate arrays.
+    #[inline(always)]
+    pub fn to_arrays(self) -> [[f32; LANES]; 3] {
+        [self.x.to_array(), self.y.to_array(), self.z.to_array()]
     }
     /// Lane `i` as a `Vec3`.
     #[inline(always)]
     pub fn lane(&self, i: usize) -> Vec3 {
-        Vec3::new(self.x.0[i], self.y.0[i], self.z.0[i])
+        Vec3::new(self.x.lane(i), self.y.lane(i), self.z.lane(i))
     }
-    /// Stores `v` in lane `i`.
+    /// Stores `v` in lane `i` (through memory: for per-lane fallbacks only).
     #[inline(always)]
     pub fn set_lane(&mut self, i: usize, v: Vec3) {
-        self.x.0[i] = v.x;
-        self.y.0[i] = v.y;
-        self.z.0[i] = v.z;
+        self.x.set_lane(i, v.x);
+        self.y.set_lane(i, v.y);
+        self.z.set_lane(i, v.z);
     }
     /// glam's `dot`: `(x x' + y y') + z z'`.
     #[inline(always)]
-    pub fn dot(self, o: V8) -> F8 {
+    pub fn dot(self, o: V8<A>) -> F8<A> {
         self.x * o.x + self.y * o.y + self.z * o.z
     }
     /// glam's `length`.
     #[inline(always)]
-    pub fn length(self) -> F8 {
+    pub fn length(self) -> F8<A> {
         self.dot(self).sqrt()
     }
     /// glam's `normalize`: `v * (1 / length)`.
     #[inline(always)]
-    pub fn normalize(self) -> V8 {
+    pub fn normalize(self) -> V8<A> {
         let r = F8::splat(1.0) / self.length();
         self * r
     }
     #[inline(always)]
-    pub fn abs(self) -> V8 {
+    pub fn abs(self) -> V8<A> {
         V8::new(self.x.abs(), self.y.abs(), self.z.abs())
     }
     /// glam's `max_element`: `max(x, max(y, z))`.
     #[inline(always)]
-    pub fn max_element(self) -> F8 {
+    pub fn max_element(self) -> F8<A> {
         self.x.max(self.y.max(self.z))
     }
     /// Lane-wise `self == 0` (all three components).
     #[inline(always)]
-    pub fn is_zero(self) -> M8 {
+    pub fn is_zero(self) -> M8<A> {
         let z = F8::splat(0.0);
         (self.x.eq(z) & self.y.eq(z)) & self.z.eq(z)
     }
     /// Lane-wise glam `is_finite`.
     #[inline(always)]
-    pub fn is_finite(self) -> M8 {
+    pub fn is_finite(self) -> M8<A> {
         self.x.is_finite() & self.y.is_finite() & self.z.is_finite()
     }
     /// Per-lane select.
     #[inline(always)]
-    pub fn select(m: M8, a: V8, b: V8) -> V8 {
+    pub fn select(m: M8<A>, a: V8<A>, b: V8<A>) -> V8<A> {
         V8::new(select(m, a.x, b.x), select(m, a.y, b.y), select(m, a.z, b.z))
     }
 }
 
-impl Add for V8 {
-    type Output = V8;
+impl<const A: bool> Add for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn add(self, o: V8) -> V8 {
+    fn add(self, o: V8<A>) -> V8<A> {
         V8::new(self.x + o.x, self.y + o.y, self.z + o.z)
     }
 }
-impl Sub for V8 {
-    type Output = V8;
+impl<const A: bool> Sub for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn sub(self, o: V8) -> V8 {
+    fn sub(self, o: V8<A>) -> V8<A> {
         V8::new(self.x - o.x, self.y - o.y, self.z - o.z)
     }
 }
 /// Component-wise product (glam `Vec3 * Vec3`).
-impl Mul for V8 {
-    type Output = V8;
+impl<const A: bool> Mul for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn mul(self, o: V8) -> V8 {
+    fn mul(self, o: V8<A>) -> V8<A> {
         V8::new(self.x * o.x, self.y * o.y, self.z * o.z)
     }
 }
 /// Per-lane scale (glam `Vec3 * f32`; the product commutes exactly, so also `f32 * Vec3`).
-impl Mul<F8> for V8 {
-    type Output = V8;
+impl<const A: bool> Mul<F8<A>> for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn mul(self, s: F8) -> V8 {
+    fn mul(self, s: F8<A>) -> V8<A> {
         V8::new(self.x * s, self.y * s, self.z * s)
     }
 }
 /// Per-lane division (glam `Vec3 / f32`).
-impl Div<F8> for V8 {
-    type Output = V8;
+impl<const A: bool> Div<F8<A>> for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn div(self, s: F8) -> V8 {
+    fn div(self, s: F8<A>) -> V8<A> {
         V8::new(self.x / s, self.y / s, self.z / s)
     }
 }
-impl Neg for V8 {
-    type Output = V8;
+impl<const A: bool> Neg for V8<A> {
+    type Output = V8<A>;
     #[inline(always)]
-    fn neg(self) -> V8 {
+    fn neg(self) -> V8<A> {
         V8::new(-self.x, -self.y, -self.z)
     }
 }
@@ -401,8 +577,8 @@ pub struct Sampler8<const AVX2: bool> {
 
 /// 0.32 fixed point to `[0, 1)` (as `filtrace_core::sampler::to_unit_float`).
 #[inline(always)]
-fn unit8(x: [u32; LANES]) -> F8 {
-    F8(per_lane(|i| (x[i] >> 8) as f32 * (1.0 / 16_777_216.0)))
+fn unit8<const A: bool>(x: [u32; LANES]) -> F8<A> {
+    F8::from_array(per_lane(|i| (x[i] >> 8) as f32 * (1.0 / 16_777_216.0)))
 }
 
 /// [`sobol_dim1_reversed`] of eight lanes: table gathers when `AVX2` (the caller must be
@@ -458,7 +634,7 @@ impl<const AVX2: bool> Sampler8<AVX2> {
 
     /// The 2D sample of dimension slot `slot` of every lane.
     #[inline(always)]
-    pub fn next_2d(&self, slot: u32) -> (F8, F8) {
+    pub fn next_2d(&self, slot: u32) -> (F8<AVX2>, F8<AVX2>) {
         let (seed, i_rev) = self.seed_and_index(slot);
         let x = u8x(|i| {
             laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
@@ -470,7 +646,7 @@ impl<const AVX2: bool> Sampler8<AVX2> {
 
     /// The 1D sample of dimension slot `slot` of every lane (the `x` of `next_2d`).
     #[inline(always)]
-    pub fn next_1d(&self, slot: u32) -> F8 {
+    pub fn next_1d(&self, slot: u32) -> F8<AVX2> {
         let (seed, i_rev) = self.seed_and_index(slot);
         unit8(u8x(|i| {
             laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
@@ -499,15 +675,15 @@ mod tests {
                     // The gather version (called here outside AVX2 code: correct, just
                     // not inlined).
                     let (gx, gy) = Sampler8::<true>::new(keys, index).next_2d(slot);
-                    assert_eq!((gx, gy), (x, y));
+                    assert_eq!((gx.to_array(), gy.to_array()), (x.to_array(), y.to_array()));
                 }
                 for (i, &key) in keys.iter().enumerate() {
                     let mut s = Sampler::from_pixel_key(key, index);
                     s.set_slot(slot);
                     let u = s.next_2d();
-                    assert_eq!((x.0[i].to_bits(), y.0[i].to_bits()), (u.x.to_bits(), u.y.to_bits()));
+                    assert_eq!((x.lane(i).to_bits(), y.lane(i).to_bits()), (u.x.to_bits(), u.y.to_bits()));
                     s.set_slot(slot);
-                    assert_eq!(one.0[i].to_bits(), s.next_1d().to_bits());
+                    assert_eq!(one.lane(i).to_bits(), s.next_1d().to_bits());
                 }
             }
         }
@@ -517,7 +693,7 @@ mod tests {
     fn vector_helpers_match_glam() {
         let v: Vec<Vec3> =
             (0..LANES).map(|i| Vec3::new(0.3 + i as f32, -1.7 * i as f32, 1.0 / (1.0 + i as f32))).collect();
-        let mut a = V8::default();
+        let mut a = V8::<false>::default();
         for (i, x) in v.iter().enumerate() {
             a.set_lane(i, *x);
         }
@@ -525,8 +701,8 @@ mod tests {
         let d = a.dot(n);
         for (i, x) in v.iter().enumerate() {
             assert_eq!(n.lane(i), x.normalize());
-            assert_eq!(d.0[i], x.dot(x.normalize()));
-            assert_eq!(a.max_element().0[i], x.max_element());
+            assert_eq!(d.lane(i), x.dot(x.normalize()));
+            assert_eq!(a.max_element().lane(i), x.max_element());
         }
     }
 }

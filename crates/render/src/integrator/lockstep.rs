@@ -85,29 +85,29 @@ impl LaneStats {
 
 /// The hit records of eight lanes, structure of arrays (a [`SurfaceInteraction`] per lane).
 #[derive(Clone, Copy, Debug, Default)]
-struct Surf8 {
-    p: V8,
+struct Surf8<const A: bool> {
+    p: V8<A>,
     /// `p_error` (the same value in all three components).
-    err: F8,
-    n_g: V8,
-    n_s: V8,
-    n_winding: V8,
-    front_face: M8,
-    wo: V8,
+    err: F8<A>,
+    n_g: V8<A>,
+    n_s: V8<A>,
+    n_winding: V8<A>,
+    front_face: M8<A>,
+    wo: V8<A>,
     uv: [Vec2; LANES],
     material: [u32; LANES],
     instance: [u32; LANES],
     prim: [u32; LANES],
-    t: F8,
+    t: F8<A>,
 }
 
-impl Surf8 {
+impl<const A: bool> Surf8<A> {
     /// Lane `i` as a [`SurfaceInteraction`] (for the per-lane scalar code).
     #[inline(always)]
     fn lane(&self, i: usize) -> SurfaceInteraction {
         SurfaceInteraction {
             p: self.p.lane(i),
-            p_error: Vec3::splat(self.err.0[i]),
+            p_error: Vec3::splat(self.err.lane(i)),
             n_g: self.n_g.lane(i),
             n_s: self.n_s.lane(i),
             n_winding: self.n_winding.lane(i),
@@ -117,14 +117,14 @@ impl Surf8 {
             material: self.material[i],
             instance: self.instance[i],
             prim: self.prim[i],
-            t: self.t.0[i],
+            t: self.t.lane(i),
         }
     }
 
     #[inline(always)]
     fn set_lane(&mut self, i: usize, si: &SurfaceInteraction) {
         self.p.set_lane(i, si.p);
-        self.err.0[i] = si.p_error.x;
+        self.err.set_lane(i, si.p_error.x);
         self.n_g.set_lane(i, si.n_g);
         self.n_s.set_lane(i, si.n_s);
         self.n_winding.set_lane(i, si.n_winding);
@@ -134,13 +134,13 @@ impl Surf8 {
         self.material[i] = si.material;
         self.instance[i] = si.instance;
         self.prim[i] = si.prim;
-        self.t.0[i] = si.t;
+        self.t.set_lane(i, si.t);
     }
 
     /// [`SurfaceInteraction::offset_origin`] in lanes: `p` pushed along `n_g` to the side
     /// of `w` by `|n_g| . p_error`.
     #[inline(always)]
-    fn offset_origin(&self, w: V8) -> V8 {
+    fn offset_origin(&self, w: V8<A>) -> V8<A> {
         let a = self.n_g.abs();
         let d = a.x * self.err + a.y * self.err + a.z * self.err;
         let below = w.dot(self.n_g).lt(F8::splat(0.0));
@@ -151,7 +151,7 @@ impl Surf8 {
 
 /// Iterates over the set lanes of `m`.
 #[inline(always)]
-fn lanes_of(m: M8) -> impl Iterator<Item = usize> {
+fn lanes_of<const A: bool>(m: M8<A>) -> impl Iterator<Item = usize> {
     let mut b = bits(m) as u32;
     std::iter::from_fn(move || {
         if b == 0 {
@@ -168,25 +168,31 @@ fn lanes_of(m: M8) -> impl Iterator<Item = usize> {
 /// with a usable hit (a hit on a degenerate triangle counts as a miss, as in the scalar
 /// `PathContext::intersect`).
 #[inline(always)]
-fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8 {
-    let hit = from_bits(hits.mask);
-    let mut p0 = V8::default();
-    let mut p1 = V8::default();
-    let mut p2 = V8::default();
-    let mut n = V8::default();
-    let mut scale = F8::default();
-    let mut plain = M8::NONE;
-    let mut scalar_ok = M8::NONE;
+fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s: &mut Surf8<A>) -> M8<A> {
+    // Per-lane loads into plain arrays, then one vector load each (setting lanes of a
+    // vector value one by one goes through memory every time).
+    let mut p = [[[0.0f32; LANES]; 3]; 3];
+    let mut n = [[0.0f32; LANES]; 3];
+    let mut scale = [0.0f32; LANES];
+    let mut plain = 0u8;
+    let mut scalar_ok = 0u8;
     let mut scalar = [None; LANES];
-    for i in lanes_of(hit) {
+    let mut b = hits.mask as u32;
+    while b != 0 {
+        let i = b.trailing_zeros() as usize;
+        b &= b - 1;
         match ctx.geometry.plain_record(hits.instance[i], hits.prim[i]) {
             Some(r) => {
-                plain.set(i, true);
-                p0.set_lane(i, r.p[0]);
-                p1.set_lane(i, r.p[1]);
-                p2.set_lane(i, r.p[2]);
-                n.set_lane(i, r.n);
-                scale.0[i] = r.scale;
+                plain |= 1 << i;
+                for (c, pc) in r.p.iter().enumerate() {
+                    p[c][0][i] = pc.x;
+                    p[c][1][i] = pc.y;
+                    p[c][2][i] = pc.z;
+                }
+                n[0][i] = r.n.x;
+                n[1][i] = r.n.y;
+                n[2][i] = r.n.z;
+                scale[i] = r.scale;
                 s.material[i] = r.material;
             }
             None => {
@@ -199,14 +205,19 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8
                 };
                 let ray = Ray::new(Vec3::ZERO, dir.lane(i));
                 scalar[i] = SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h);
-                scalar_ok.set(i, scalar[i].is_some());
+                if scalar[i].is_some() {
+                    scalar_ok |= 1 << i;
+                }
             }
         }
         s.instance[i] = hits.instance[i];
         s.prim[i] = hits.prim[i];
     }
+    let (p0, p1, p2) = (V8::from_arrays(&p[0]), V8::from_arrays(&p[1]), V8::from_arrays(&p[2]));
+    let n = V8::from_arrays(&n);
+    let scale = F8::from_array(scale);
     // The lane version of `from_hit` (mesh without normals and uvs: n_s = n_g = winding).
-    let (b1, b2) = (F8(hits.u), F8(hits.v));
+    let (b1, b2) = (F8::from_array(hits.u), F8::from_array(hits.v));
     let b0 = F8::splat(1.0) - b1 - b2;
     s.p = p0 * b0 + p1 * b1 + p2 * b2;
     s.err = scale * F8::splat(gamma(7) * OFFSET_SAFETY) + F8::splat(OFFSET_FLOOR);
@@ -219,23 +230,29 @@ fn from_hits(ctx: &PathContext, dir: &V8, hits: &HitPacket, s: &mut Surf8) -> M8
     s.n_winding = n;
     s.n_g = V8::select(flip, -n, n);
     s.n_s = s.n_g;
-    s.t = F8(hits.t) * dir_len;
-    for i in lanes_of(plain) {
-        s.uv[i] = Vec2::new(b1.0[i], b2.0[i]);
+    s.t = F8::from_array(hits.t) * dir_len;
+    let mut b = plain as u32;
+    while b != 0 {
+        let i = b.trailing_zeros() as usize;
+        b &= b - 1;
+        s.uv[i] = Vec2::new(hits.u[i], hits.v[i]);
     }
-    let ok_plain = plain & !n.is_zero();
-    for i in lanes_of(scalar_ok) {
+    let ok_plain = from_bits::<A>(plain) & !n.is_zero();
+    let mut b = scalar_ok as u32;
+    while b != 0 {
+        let i = b.trailing_zeros() as usize;
+        b &= b - 1;
         if let Some(si) = &scalar[i] {
             s.set_lane(i, si);
         }
     }
-    ok_plain | scalar_ok
+    ok_plain | from_bits(scalar_ok)
 }
 
 /// `Frame::from_z(n)` in lanes (Duff et al. 2017), as `(x, y)` (`z = n`).
 #[inline(always)]
-fn frame_from_z(n: V8) -> (V8, V8) {
-    let sign = n.z.map(|z| 1.0f32.copysign(z));
+fn frame_from_z<const A: bool>(n: V8<A>) -> (V8<A>, V8<A>) {
+    let sign = n.z.one_with_sign();
     let a = F8::splat(-1.0) / (sign + n.z);
     let b = n.x * n.y * a;
     let x = V8::new(F8::splat(1.0) + sign * n.x * n.x * a, sign * b, -sign * n.x);
@@ -245,19 +262,19 @@ fn frame_from_z(n: V8) -> (V8, V8) {
 
 /// `Frame::to_local`.
 #[inline(always)]
-fn to_local(fx: &V8, fy: &V8, n: &V8, v: V8) -> V8 {
+fn to_local<const A: bool>(fx: &V8<A>, fy: &V8<A>, n: &V8<A>, v: V8<A>) -> V8<A> {
     V8::new(v.dot(*fx), v.dot(*fy), v.dot(*n))
 }
 
 /// `Frame::to_world`.
 #[inline(always)]
-fn to_world(fx: &V8, fy: &V8, n: &V8, v: V8) -> V8 {
+fn to_world<const A: bool>(fx: &V8<A>, fy: &V8<A>, n: &V8<A>, v: V8<A>) -> V8<A> {
     *fx * v.x + *fy * v.y + *n * v.z
 }
 
 /// `power_heuristic(1, f_pdf, 1, g_pdf)` in lanes.
 #[inline(always)]
-fn power_heuristic8(f_pdf: F8, g_pdf: F8) -> F8 {
+fn power_heuristic8<const A: bool>(f_pdf: F8<A>, g_pdf: F8<A>) -> F8<A> {
     let f = F8::splat(1.0) * f_pdf;
     let g = F8::splat(1.0) * g_pdf;
     let f2 = f * f;
@@ -268,8 +285,8 @@ fn power_heuristic8(f_pdf: F8, g_pdf: F8) -> F8 {
 
 /// `sin_cos_quarter_pi` in lanes (same Horner polynomials).
 #[inline(always)]
-fn sin_cos_quarter_pi8(x: F8) -> (F8, F8) {
-    let k = F8::splat;
+fn sin_cos_quarter_pi8<const A: bool>(x: F8<A>) -> (F8<A>, F8<A>) {
+    let k = F8::<A>::splat;
     let x2 = x * x;
     let s = x
         * (k(1.0)
@@ -285,7 +302,7 @@ fn sin_cos_quarter_pi8(x: F8) -> (F8, F8) {
 /// `sample_cosine_hemisphere` in lanes: the concentric disk's two branches become a
 /// select of numerator, denominator and the roles of sine and cosine.
 #[inline(always)]
-fn sample_cosine_hemisphere8(ux: F8, uy: F8) -> V8 {
+fn sample_cosine_hemisphere8<const A: bool>(ux: F8<A>, uy: F8<A>) -> V8<A> {
     let ox = F8::splat(2.0) * ux - F8::splat(1.0);
     let oy = F8::splat(2.0) * uy - F8::splat(1.0);
     let zero = F8::splat(0.0);
@@ -324,7 +341,7 @@ pub struct LockstepContext<'a> {
 
 impl LockstepContext<'_> {
     #[inline(always)]
-    fn intersect(&self, rays: &RayPacket, active: M8) -> HitPacket {
+    fn intersect<const A: bool>(&self, rays: &RayPacket, active: M8<A>) -> HitPacket {
         match self.queries {
             RayQueries::PerLane => self.ctx.accel.intersect_packet_lanes(rays, bits(active)),
             RayQueries::Packet => self.ctx.accel.intersect_packet(rays, bits(active)),
@@ -332,7 +349,7 @@ impl LockstepContext<'_> {
     }
 
     #[inline(always)]
-    fn occluded(&self, rays: &RayPacket, active: M8) -> M8 {
+    fn occluded<const A: bool>(&self, rays: &RayPacket, active: M8<A>) -> M8<A> {
         from_bits(match self.queries {
             RayQueries::PerLane => self.ctx.accel.occluded_packet_lanes(rays, bits(active)),
             RayQueries::Packet => self.ctx.accel.occluded_packet(rays, bits(active)),
@@ -351,7 +368,7 @@ pub fn trace_group<const AVX2: bool>(
     y: u32,
     key: &[u32; LANES],
     index: u32,
-    lanes: M8,
+    lanes: M8<AVX2>,
     stats: &mut LaneStats,
 ) -> [CameraSample; LANES] {
     let ctx = &lc.ctx;
@@ -365,19 +382,19 @@ pub fn trace_group<const AVX2: bool>(
     // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
     let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
     let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
-    let px = F8(per_lane(|i| x[i] as f32));
+    let px = F8::<AVX2>::from_array(per_lane(|i| x[i] as f32));
     let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
     let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
     let dir =
         (V8::splat(cam.forward) + V8::splat(cam.right_half) * sx + V8::splat(cam.up_half) * sy).normalize();
     let mut rays = RayPacket {
         origin: [[cam.eye.x; LANES], [cam.eye.y; LANES], [cam.eye.z; LANES]],
-        dir: [dir.x.0, dir.y.0, dir.z.0],
+        dir: dir.to_arrays(),
         t_min: [0.0; LANES],
         t_max: [f32::INFINITY; LANES],
     };
     let hits = lc.intersect(&rays, lanes);
-    let mut si = Surf8::default();
+    let mut si = Surf8::<AVX2>::default();
     let hit = from_hits(ctx, &dir, &hits, &mut si);
     let want_surface = index == 0;
     for i in lanes_of(lanes) {
@@ -393,12 +410,12 @@ pub fn trace_group<const AVX2: bool>(
 
     // The paths from the first hits (`trace_from_hit`).
     let mut act = hit;
-    let zero = F8::splat(0.0);
+    let zero = F8::<AVX2>::splat(0.0);
     let mut beta = V8::splat(Rgb::ONE);
     let mut l_direct = V8::default();
     let mut l_indirect = V8::default();
     let mut p_b = zero;
-    let mut specular = M8::NONE;
+    let mut specular = M8::none();
     let mut prev_p = V8::default();
     let mut vertex = 0u32;
     let materials = &ctx.scene.materials;
@@ -425,7 +442,7 @@ pub fn trace_group<const AVX2: bool>(
                         si.p.lane(i),
                         si.n_winding.lane(i),
                     );
-                    power_heuristic(1.0, p_b.0[i], 1.0, p_l)
+                    power_heuristic(1.0, p_b.lane(i), 1.0, p_l)
                 };
                 let l = beta.lane(i) * w_b * le;
                 if vertex <= 1 {
@@ -445,26 +462,29 @@ pub fn trace_group<const AVX2: bool>(
         // `None` stores one tag byte per lane (a default BSDF copied into eight lanes
         // was a memset/memcpy per bounce); only the glossy lanes read their BSDF.
         let mut bsdf: [Option<SurfaceBsdf>; LANES] = [None; LANES];
-        let mut diffuse = M8::NONE;
-        let mut lobe = M8::NONE;
-        let mut rho = V8::default();
+        let mut diffuse = 0u8;
+        let mut lobe = 0u8;
+        let mut rho = [[0.0f32; LANES]; 3];
         for i in lanes_of(act) {
             // Untextured Lambert (most surfaces): its reflectance only, no BSDF record.
             if let Some(r) = ctx.geometry.constant_diffuse(si.material[i]) {
-                diffuse.set(i, true);
-                rho.set_lane(i, r);
+                diffuse |= 1 << i;
+                (rho[0][i], rho[1][i], rho[2][i]) = (r.x, r.y, r.z);
                 continue;
             }
             let b = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
             match &b {
                 SurfaceBsdf::Diffuse(d) => {
-                    diffuse.set(i, true);
-                    rho.set_lane(i, d.reflectance);
+                    diffuse |= 1 << i;
+                    let r = d.reflectance;
+                    (rho[0][i], rho[1][i], rho[2][i]) = (r.x, r.y, r.z);
                 }
-                b => lobe.set(i, b.has_lobe_choice()),
+                b => lobe |= (b.has_lobe_choice() as u8) << i,
             }
             bsdf[i] = Some(b);
         }
+        let (diffuse, lobe) = (from_bits::<AVX2>(diffuse), from_bits::<AVX2>(lobe));
+        let rho = V8::from_arrays(&rho);
         let glossy = act & !diffuse;
         let (fx, fy) = frame_from_z(si.n_s);
         let n = si.n_s;
@@ -483,44 +503,61 @@ pub fn trace_group<const AVX2: bool>(
 
         // Next-event estimation (`sample_one_light`): light choice per lane, area lights
         // sampled in lanes, other lights by the scalar `sample_li`.
-        let mut area = M8::NONE;
-        let mut ls_ok = M8::NONE;
-        let mut ls_wi = V8::default();
-        let mut ls_li = V8::default();
-        let mut ls_pdf = zero;
-        let mut ls_dist = zero;
-        let mut ls_delta = M8::NONE;
-        let mut pmf = zero;
-        let (mut a_p0, mut a_e1, mut a_e2, mut a_n) =
-            (V8::default(), V8::default(), V8::default(), V8::default());
-        let mut a_area = zero;
-        let mut a_two = M8::NONE;
+        // Per-lane values go to plain arrays first (one vector load each afterwards).
+        let mut area = 0u8;
+        let mut ls_ok = 0u8;
+        let mut ls_delta = 0u8;
+        let mut a_two = 0u8;
+        let mut ls_wi = [[0.0f32; LANES]; 3];
+        let mut ls_li = [[0.0f32; LANES]; 3];
+        let mut ls_pdf = [0.0f32; LANES];
+        let mut ls_dist = [0.0f32; LANES];
+        let mut pmf = [0.0f32; LANES];
+        let mut a_v = [[[0.0f32; LANES]; 3]; 4];
+        let mut a_area = [0.0f32; LANES];
+        let u_sel = u_select.to_array();
         for i in lanes_of(act) {
-            let (li, pm) = ctx.lights.select(u_select.0[i]);
+            let (li, pm) = ctx.lights.select(u_sel[i]);
             if pm > 0.0 {
                 if let Some(a) = ctx.lights.area_light(li) {
-                    area.set(i, true);
-                    pmf.0[i] = pm;
-                    a_p0.set_lane(i, a.p0);
-                    a_e1.set_lane(i, a.e1);
-                    a_e2.set_lane(i, a.e2);
-                    a_n.set_lane(i, a.n);
-                    a_area.0[i] = a.area;
-                    a_two.set(i, a.two_sided);
-                    ls_li.set_lane(i, a.le);
+                    area |= 1 << i;
+                    pmf[i] = pm;
+                    for (k, v) in [a.p0, a.e1, a.e2, a.n].iter().enumerate() {
+                        (a_v[k][0][i], a_v[k][1][i], a_v[k][2][i]) = (v.x, v.y, v.z);
+                    }
+                    a_area[i] = a.area;
+                    a_two |= (a.two_sided as u8) << i;
+                    (ls_li[0][i], ls_li[1][i], ls_li[2][i]) = (a.le.x, a.le.y, a.le.z);
                     continue;
                 }
             }
-            if let Some(ls) = ctx.lights.sample_li(si.p.lane(i), u_select.0[i], Vec2::new(ulx.0[i], uly.0[i]))
+            if let Some(ls) =
+                ctx.lights.sample_li(si.p.lane(i), u_sel[i], Vec2::new(ulx.lane(i), uly.lane(i)))
             {
-                ls_ok.set(i, true);
-                ls_wi.set_lane(i, ls.wi);
-                ls_li.set_lane(i, ls.li);
-                ls_pdf.0[i] = ls.pdf;
-                ls_dist.0[i] = ls.dist;
-                ls_delta.set(i, ls.delta);
+                ls_ok |= 1 << i;
+                (ls_wi[0][i], ls_wi[1][i], ls_wi[2][i]) = (ls.wi.x, ls.wi.y, ls.wi.z);
+                (ls_li[0][i], ls_li[1][i], ls_li[2][i]) = (ls.li.x, ls.li.y, ls.li.z);
+                ls_pdf[i] = ls.pdf;
+                ls_dist[i] = ls.dist;
+                ls_delta |= (ls.delta as u8) << i;
             }
         }
+        let area = from_bits::<AVX2>(area);
+        let mut ls_ok = from_bits::<AVX2>(ls_ok);
+        let ls_delta = from_bits::<AVX2>(ls_delta);
+        let a_two = from_bits::<AVX2>(a_two);
+        let mut ls_wi = V8::from_arrays(&ls_wi);
+        let ls_li = V8::from_arrays(&ls_li);
+        let mut ls_pdf = F8::from_array(ls_pdf);
+        let mut ls_dist = F8::from_array(ls_dist);
+        let pmf = F8::from_array(pmf);
+        let (a_p0, a_e1, a_e2, a_n) = (
+            V8::from_arrays(&a_v[0]),
+            V8::from_arrays(&a_v[1]),
+            V8::from_arrays(&a_v[2]),
+            V8::from_arrays(&a_v[3]),
+        );
+        let a_area = F8::from_array(a_area);
         if area.any() {
             // `AreaLight::sample` with `sample_uniform_triangle`.
             let m = F8::splat(0.5) * ulx.min(uly);
@@ -558,18 +595,21 @@ pub fn trace_group<const AVX2: bool>(
             if let Some(b) = &bsdf[i] {
                 let (wo_i, wi_i) = (wo.lane(i), wi_l.lane(i));
                 f.set_lane(i, b.f(wo_i, wi_i) * wi_i.z.abs());
-                pdf_b.0[i] = b.pdf(wo_i, wi_i);
+                pdf_b.set_lane(i, b.pdf(wo_i, wi_i));
             }
         }
         let shadow = usable & !f.is_zero();
         let s_org = si.offset_origin(ls_wi);
-        let far =
-            ls_dist.map(|d| if d.is_finite() { d * (1.0 - SHADOW_END_FRACTION) } else { f32::INFINITY });
+        let far = select(
+            ls_dist.is_finite(),
+            ls_dist * F8::splat(1.0 - SHADOW_END_FRACTION),
+            F8::splat(f32::INFINITY),
+        );
         let srays = RayPacket {
-            origin: [s_org.x.0, s_org.y.0, s_org.z.0],
-            dir: [ls_wi.x.0, ls_wi.y.0, ls_wi.z.0],
+            origin: s_org.to_arrays(),
+            dir: ls_wi.to_arrays(),
             t_min: [0.0; LANES],
-            t_max: far.0,
+            t_max: far.to_array(),
         };
         let occluded = lc.occluded(&srays, shadow);
         let lit = shadow & !occluded;
@@ -588,17 +628,17 @@ pub fn trace_group<const AVX2: bool>(
         let mut bs_pdf = bs_wi.z.max(zero) * F8::splat(FRAC_1_PI);
         let mut bs_f = f_d;
         let mut bs_ok = !wo.z.le(zero) & !bs_pdf.le(zero);
-        let mut bs_spec = M8::NONE;
+        let mut bs_spec = M8::none();
         for i in lanes_of(glossy) {
             let sample = bsdf[i]
                 .as_ref()
-                .and_then(|b| b.sample(wo.lane(i), Vec2::new(ubx.0[i], uby.0[i]), u_lobe.0[i]));
+                .and_then(|b| b.sample(wo.lane(i), Vec2::new(ubx.lane(i), uby.lane(i)), u_lobe.lane(i)));
             match sample {
                 Some(bs) => {
                     bs_ok.set(i, true);
                     bs_wi.set_lane(i, bs.wi);
                     bs_f.set_lane(i, bs.f);
-                    bs_pdf.0[i] = bs.pdf;
+                    bs_pdf.set_lane(i, bs.pdf);
                     bs_spec.set(i, bs.specular);
                 }
                 None => bs_ok.set(i, false),
@@ -628,8 +668,8 @@ pub fn trace_group<const AVX2: bool>(
         }
 
         // Find the next vertex; a miss adds the environment, MIS-weighted.
-        rays.origin = [org.x.0, org.y.0, org.z.0];
-        rays.dir = [wi.x.0, wi.y.0, wi.z.0];
+        rays.origin = org.to_arrays();
+        rays.dir = wi.to_arrays();
         let hits = lc.intersect(&rays, act);
         // The records of the new vertices replace the old ones in place (no 1 kB copy).
         let found = from_hits(ctx, &wi, &hits, &mut si);
@@ -642,7 +682,7 @@ pub fn trace_group<const AVX2: bool>(
                     let w_b = if specular.get(i) {
                         1.0
                     } else {
-                        power_heuristic(1.0, p_b.0[i], 1.0, ctx.lights.pdf_environment(w))
+                        power_heuristic(1.0, p_b.lane(i), 1.0, ctx.lights.pdf_environment(w))
                     };
                     let l = beta.lane(i) * w_b * le;
                     if vertex <= 1 {

@@ -17,14 +17,22 @@ use std::borrow::Cow;
 pub const LANES: usize = 8;
 
 /// Fewest active lanes for which the closest-hit packet kernel beats one single-ray query
-/// per lane. `cargo run --release -p filtrace-accel --example packet_lanes` (Cornell box,
-/// AVX2, CPU time per ray, single / packet): 4 lanes 1.81x (camera tiles) and 1.16x
-/// (incoherent), 3 lanes 1.37x and 0.88x, 2 lanes 0.94x and 0.60x.
-const MIN_LANES_CLOSEST: u32 = 4;
+/// per lane on a flat mesh. `cargo run --release -p filtrace-accel --example packet_lanes`
+/// (Cornell box, AVX2, group boxes on both paths, CPU time per ray, single / packet): 3 lanes 1.82x
+/// (camera tiles) and 1.30x (incoherent), 2 lanes 1.22x and 1.10x, 1 lane 0.74x and 0.64x.
+/// Cornell render (`throughput 16 1`, 3 interleaved runs, with [`MIN_LANES_ANY`]): 4 and 5
+/// lanes 2.02-2.03 M samples per CPU-s, 2 and 3 lanes 2.08-2.12, 1 and 1 2.05-2.12.
+const MIN_LANES_CLOSEST: u32 = 2;
 
-/// The same for any-hit queries: 5 lanes 1.14x (shadow rays) and 1.27x (incoherent),
-/// 4 lanes 0.91x and 1.09x.
-const MIN_LANES_ANY: u32 = 5;
+/// The same for any-hit queries: 4 lanes 1.17x (shadow rays) and 1.12x (incoherent),
+/// 3 lanes 0.95x and 0.97x, 2 lanes 0.73x and 0.78x; the render (above) is as fast or
+/// faster with 3 as with 4.
+const MIN_LANES_ANY: u32 = 3;
+
+/// The thresholds of the packet traversal of BVH meshes (camera tiles on the bunny, single
+/// / packet: 4 lanes 1.05x, 3 lanes 0.93x; docs/perf-accel.md, third pass).
+const MIN_LANES_CLOSEST_BVH: u32 = 4;
+const MIN_LANES_ANY_BVH: u32 = 5;
 
 /// One triangle of a flat bottom level as the 8-ray packet kernels read it: each corner
 /// a 16-byte row `[x, y, z, x]` (a ray's permuted axes are picked from it with one shuffle
@@ -58,13 +66,16 @@ pub(crate) struct FlatGroup {
 /// Most groups of a flat bottom level (the kernels keep the touched ones in a `u32`).
 pub(crate) const MAX_FLAT_GROUPS: usize = 32;
 
-/// Padding of the group boxes, relative to the largest coordinate magnitude of the mesh.
-/// Boxes only cull, so any padding keeps the results exact; it makes the culling safe
-/// also against the watertight test's rounding of `t` near a triangle's plane (a hit
-/// reported a few ulps of the scene scale behind the origin would otherwise be culled
-/// by a box test that computes the plane distance exactly): the Cornell box's boxes grow
-/// by half a unit of its 556.
-pub(crate) const FLAT_BOX_PAD: f32 = 1.0 / 1024.0;
+/// Padding of the group boxes, relative to the largest coordinate magnitude of the mesh
+/// (`2^-20`: half a thousandth of a unit on the Cornell box's 559). Boxes only cull, so any
+/// padding keeps the results exact. Without it a box around an axis-aligned wall is flat,
+/// and a ray starting in the wall's plane, or a few ulps of the scene scale off it, would
+/// be culled by the box test even where the watertight test's rounding of `t` reports a
+/// hit at `t >= t_min = 0`. Kept below the renderer's ray offsets (`4 gamma(7)` of the
+/// scene scale, ~9e-4 on the Cornell box): a shadow ray leaving a wall then skips that
+/// wall's group (a pad of `2^-10` kept it: 5.2 instead of 2.7 groups per shadow packet in
+/// the Cornell render, -5 % samples per CPU-s).
+pub(crate) const FLAT_BOX_PAD: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Cost of one 8-ray box test relative to one 8-ray triangle test, for grouping.
 pub(crate) const FLAT_BOX_COST: f32 = 0.3;
@@ -270,9 +281,12 @@ impl SceneAccel {
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_CLOSEST {
             if let Some((object, rays, active)) = self.single_object(rays, active) {
+                let min = if self.object_blas(object).flat { 0 } else { MIN_LANES_CLOSEST_BVH };
                 // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
-                if let Some(hits) = unsafe { self.intersect_packet_avx2(object, &rays, active) } {
-                    return hits;
+                if active.count_ones() >= min {
+                    if let Some(hits) = unsafe { self.intersect_packet_avx2(object, &rays, active) } {
+                        return hits;
+                    }
                 }
             }
         }
@@ -293,8 +307,10 @@ impl SceneAccel {
                 let occluded = unsafe {
                     if blas.flat {
                         Some(avx2_packet::occluded_flat(blas, &rays, active))
-                    } else {
+                    } else if active.count_ones() >= MIN_LANES_ANY_BVH {
                         avx2_packet::occluded_bvh(blas, &rays, active)
+                    } else {
+                        None
                     }
                 };
                 if let Some(o) = occluded {

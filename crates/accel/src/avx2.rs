@@ -92,9 +92,11 @@ unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m
             _mm256_fmsub_ps(_mm256_load_ps(b.add(r.far[2])), r.inv[2], r.oinv_far[2]),
         )
     };
-    // As in the SSE test: `max(a, b)` returns `b` when either is NaN, so the slab distances
-    // go first (NaN cannot occur with finite reciprocals and boxes, but an empty slot's
-    // infinite bounds give `±inf`, which fails the comparison as it should).
+    // Two levels of min/max instead of a chain of three (shorter latency). `max(a, b)`
+    // returns `b` when either is NaN, so `t_min` and the cull bound go last and the results
+    // are never NaN; a NaN slab distance (only from an overflowing `o inv`; an empty slot's
+    // infinite bounds give `±inf`, which fails the comparison as it should) may drop the
+    // other slab of its pair, which only widens the box (conservative).
     let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
     let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(cull_bound(t_max)))));
     let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
@@ -191,23 +193,30 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
     let mut t_near = Lanes8([0.0; 8]);
     loop {
         if cur.count == 0 {
-            let node = &nodes[cur.child as usize];
+            debug_assert!((cur.child as usize) < nodes.len());
+            // SAFETY: child indices of a built tree are in range (`wide::validate`).
+            let node = unsafe { nodes.get_unchecked(cur.child as usize) };
             // SAFETY: this function runs with AVX2 (its target features).
             let (mask, tn) = unsafe { box8(node, r, t_min8, *t_max) };
             if mask != 0 {
                 // SAFETY: `Lanes8` is 32-byte aligned.
                 unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
                 let e = |i: usize| Entry { child: node.child[i], count: node.count[i], t: t_near.0[i] };
-                // Start fetching every child to be visited while the order is worked out.
+                // Start fetching every child to be visited while the order is worked out,
+                // without a branch on node or leaf (it was mispredicted near the leaves):
+                // the 4 lines of a node, or the up to 6 lines of a two-packet leaf from
+                // the line holding its first byte (a node gets its first two lines again).
                 let mut bits = mask;
                 while bits != 0 {
                     let i = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    if node.count[i] == 0 {
-                        prefetch(nodes.as_ptr().wrapping_add(node.child[i] as usize) as *const u8, 4);
-                    } else {
-                        leaves.prefetch(node.child[i], node.count[i]);
-                    }
+                    let (c, n) = (node.child[i], node.count[i]);
+                    let inner = nodes.as_ptr().wrapping_add(c as usize) as usize;
+                    let leaf = leaves.leaf_addr(c) & !63;
+                    let p = if n == 0 { inner } else { leaf };
+                    let rest = if n == 0 { p } else { p + 256 };
+                    prefetch(p as *const u8, 4);
+                    prefetch(rest as *const u8, 2);
                 }
                 cur = if ORDERED && mask.count_ones() >= 3 {
                     // SAFETY: AVX2 (this function's target features); at most 8 entries
@@ -227,8 +236,9 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
                 return false;
             }
             sp -= 1;
-            // SAFETY: entries below `sp` were written before `sp` was raised past them.
-            let e = unsafe { stack[sp].assume_init() };
+            // SAFETY: entries below `sp` were written before `sp` was raised past them
+            // (and `sp < STACK8`).
+            let e = unsafe { stack.get_unchecked(sp).assume_init() };
             if e.t <= cull_bound(*t_max) {
                 cur = e;
                 break;
@@ -556,6 +566,11 @@ impl Leaves for &mut ClosestPairs<'_> {
     fn prefetch(&self, first: u32, count: u32) {
         prefetch_packets(self.packets, first, count);
     }
+
+    #[inline(always)]
+    fn leaf_addr(&self, first: u32) -> usize {
+        self.packets.as_ptr().wrapping_add(first as usize) as usize
+    }
 }
 
 /// Any-hit leaf test over packet pairs.
@@ -585,6 +600,11 @@ impl Leaves for AnyPairs<'_> {
     #[inline(always)]
     fn prefetch(&self, first: u32, count: u32) {
         prefetch_packets(self.packets, first, count);
+    }
+
+    #[inline(always)]
+    fn leaf_addr(&self, first: u32) -> usize {
+        self.packets.as_ptr().wrapping_add(first as usize) as usize
     }
 }
 

@@ -287,6 +287,13 @@ pub(crate) trait Leaves {
     /// Hint that the leaf `first .. first + count` will be visited soon.
     #[inline(always)]
     fn prefetch(&self, _first: u32, _count: u32) {}
+
+    /// Address of the first byte of leaf `first` (the 8-wide traversal prefetches the
+    /// cache lines from there without a branch on leaf or node); 0 where unknown.
+    #[inline(always)]
+    fn leaf_addr(&self, _first: u32) -> usize {
+        0
+    }
 }
 
 impl<F: FnMut(u32, u32, &mut f32) -> bool> Leaves for F {

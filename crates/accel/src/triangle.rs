@@ -33,16 +33,19 @@ impl WatertightRay {
         // cost as much as a triangle packet test on small scenes. Same result as
         // `kz = argmax |d|` (first axis on ties), `kx, ky` the next axes, swapped when
         // `d[kz] < 0`.
+        // The components are read from an array: `Vec3`'s `Index` is a `match`, which
+        // compiled to two data-dependent branches per lookup.
         let a = dir.abs();
+        let d = dir.to_array();
         let x_max = (a.x >= a.y) & (a.x >= a.z);
         let z_over_y = a.y < a.z;
         let kz = (!x_max as usize) * (1 + z_over_y as usize);
         let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
         // Swap kx and ky to preserve the winding direction of triangles.
-        let swap = 0usize.wrapping_sub((dir[kz] < 0.0) as usize);
+        let swap = 0usize.wrapping_sub((d[kz] < 0.0) as usize);
         let (kx, ky) = (kx ^ ((kx ^ ky) & swap), ky ^ ((kx ^ ky) & swap));
-        let sz = 1.0 / dir[kz];
-        Self { org: origin.to_array(), kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz }
+        let sz = 1.0 / d[kz];
+        Self { org: origin.to_array(), kx, ky, kz, sx: d[kx] * sz, sy: d[ky] * sz, sz }
     }
 }
 

@@ -68,8 +68,10 @@ struct InstanceRecord {
     has_uvs: bool,
 }
 
-/// Per-triangle data of [`SceneGeometry`].
+/// Per-triangle data of [`SceneGeometry`]; `repr(C)`: the lockstep integrator reads the
+/// records as rows of [`TRI_FLOATS`] 32-bit words ([`SceneGeometry::tri_words`]).
 #[derive(Clone, Copy, Debug)]
+#[repr(C)]
 pub(crate) struct TriangleRecord {
     /// World-space corners.
     pub(crate) p: [Vec3; 3],
@@ -80,6 +82,11 @@ pub(crate) struct TriangleRecord {
     pub(crate) scale: f32,
     pub(crate) material: MaterialId,
 }
+
+/// 32-bit words per [`TriangleRecord`]: `p` at 0..9, `n` at 9..12, `scale` at 12, the
+/// material's bits at 13.
+pub(crate) const TRI_FLOATS: usize = 14;
+const _: () = assert!(std::mem::size_of::<TriangleRecord>() == TRI_FLOATS * 4);
 
 impl SceneGeometry {
     pub fn new(scene: &Scene) -> Self {
@@ -129,16 +136,27 @@ impl SceneGeometry {
         &self.tris[(self.instances[instance as usize].first_tri + prim) as usize]
     }
 
-    /// The record of triangle `prim` of instance `instance` when its mesh has neither
-    /// vertex normals nor uvs (the lockstep integrator's vector `from_hit`; other hits go
-    /// through [`SurfaceInteraction::from_hit`]).
+    /// For triangle `prim` of instance `instance` when its mesh has neither vertex normals
+    /// nor uvs: the row of its record in [`Self::tri_words`] and its material (the lockstep
+    /// integrator's vector `from_hit`; other hits go through
+    /// [`SurfaceInteraction::from_hit`]).
     #[inline]
-    pub(crate) fn plain_record(&self, instance: u32, prim: u32) -> Option<&TriangleRecord> {
+    pub(crate) fn plain_row(&self, instance: u32, prim: u32) -> Option<(usize, MaterialId)> {
         let inst = &self.instances[instance as usize];
         if inst.has_normals || inst.has_uvs {
             return None;
         }
-        Some(&self.tris[(inst.first_tri + prim) as usize])
+        let row = (inst.first_tri + prim) as usize;
+        Some((row, self.tris[row].material))
+    }
+
+    /// The triangle records as rows of [`TRI_FLOATS`] words (the material as its bits).
+    #[inline]
+    pub(crate) fn tri_words(&self) -> &[f32] {
+        // SAFETY: `TriangleRecord` is `repr(C)` of 14 four-byte fields (`f32` and `u32`;
+        // the size assertion above), so the buffer holds `len * TRI_FLOATS` initialised
+        // words aligned for `f32`; every bit pattern is a valid `f32`.
+        unsafe { std::slice::from_raw_parts(self.tris.as_ptr() as *const f32, self.tris.len() * TRI_FLOATS) }
     }
 
     /// World-space corners of triangle `prim` of instance `instance`.

@@ -22,9 +22,7 @@
 //! functions or methods (a closure or an out-of-line helper does not inherit the AVX2
 //! target feature of its caller and would compile to SSE or to a call per operation).
 
-use filtrace_core::sampler::{
-    hash_combine, hash_u32, laine_karras_permutation, sobol_dim1_reversed, SOBOL_DIM1_REV_TABLES,
-};
+use filtrace_core::sampler::{sobol_dim1_reversed, SOBOL_DIM1_REV_TABLES};
 use filtrace_core::Vec3;
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
@@ -553,82 +551,275 @@ impl<const A: bool> Neg for V8<A> {
     }
 }
 
-/// Eight `u32` lanes, lane-wise.
+/// Eight-word rows of a table as lanes: `out[j]` lane `i` is `table[start[i] + j]`. With
+/// AVX2 one unaligned load per row and an 8 x 8 transpose (`vunpcklps`/`vunpckhps`,
+/// `vshufps`, `vperm2f128`: 24 shuffles) instead of 64 scalar loads and stores, or eight
+/// gathers (slower on the development machine, see docs/perf-render.md). `None` when a
+/// row does not lie in `table`.
 #[inline(always)]
-fn u8x(f: impl Fn(usize) -> u32) -> [u32; LANES] {
-    per_lane(f)
+pub fn columns<const A: bool>(table: &[f32], start: &[usize; LANES]) -> Option<[F8<A>; 8]> {
+    if start.iter().any(|&s| s > table.len() || table.len() - s < 8) {
+        return None;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if A {
+        // SAFETY: AVX (see `avx_or!`); every row `start[i]..start[i] + 8` is in `table`
+        // (checked above).
+        unsafe {
+            let p = table.as_ptr();
+            let r: [__m256; LANES] = [
+                _mm256_loadu_ps(p.add(start[0])),
+                _mm256_loadu_ps(p.add(start[1])),
+                _mm256_loadu_ps(p.add(start[2])),
+                _mm256_loadu_ps(p.add(start[3])),
+                _mm256_loadu_ps(p.add(start[4])),
+                _mm256_loadu_ps(p.add(start[5])),
+                _mm256_loadu_ps(p.add(start[6])),
+                _mm256_loadu_ps(p.add(start[7])),
+            ];
+            let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+            let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+            let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+            let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+            let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+            let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+            let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+            let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+            let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+            let u1 = _mm256_shuffle_ps::<0xee>(t0, t2);
+            let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+            let u3 = _mm256_shuffle_ps::<0xee>(t1, t3);
+            let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+            let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
+            let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+            let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
+            return Some([
+                F8(_mm256_permute2f128_ps::<0x20>(u0, u4)),
+                F8(_mm256_permute2f128_ps::<0x20>(u1, u5)),
+                F8(_mm256_permute2f128_ps::<0x20>(u2, u6)),
+                F8(_mm256_permute2f128_ps::<0x20>(u3, u7)),
+                F8(_mm256_permute2f128_ps::<0x31>(u0, u4)),
+                F8(_mm256_permute2f128_ps::<0x31>(u1, u5)),
+                F8(_mm256_permute2f128_ps::<0x31>(u2, u6)),
+                F8(_mm256_permute2f128_ps::<0x31>(u3, u7)),
+            ]);
+        }
+    }
+    let mut out = [F8::splat(0.0); 8];
+    for (j, c) in out.iter_mut().enumerate() {
+        *c = F8::from_array(per_lane(|i| table[start[i] + j]));
+    }
+    Some(out)
+}
+
+/// Eight `u32` lanes (the sampler's integer hashes; `A` as for [`F8`]).
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct U8<const A: bool>(Raw);
+
+/// `rev4(i) << 4` and `rev4(i)` for the nibbles `i` (bit reversal by `vpshufb`).
+#[cfg(target_arch = "x86_64")]
+const REV_NIBBLE_HI: [u8; 16] =
+    [0x00, 0x80, 0x40, 0xc0, 0x20, 0xa0, 0x60, 0xe0, 0x10, 0x90, 0x50, 0xd0, 0x30, 0xb0, 0x70, 0xf0];
+#[cfg(target_arch = "x86_64")]
+const REV_NIBBLE_LO: [u8; 16] =
+    [0x0, 0x8, 0x4, 0xc, 0x2, 0xa, 0x6, 0xe, 0x1, 0x9, 0x5, 0xd, 0x3, 0xb, 0x7, 0xf];
+
+impl<const A: bool> U8<A> {
+    #[inline(always)]
+    pub fn from_array(a: [u32; LANES]) -> U8<A> {
+        // SAFETY: 32 plain bytes either way.
+        U8(unsafe { std::mem::transmute::<[u32; LANES], Raw>(a) })
+    }
+    #[inline(always)]
+    pub fn to_array(self) -> [u32; LANES] {
+        // SAFETY: as above.
+        unsafe { std::mem::transmute::<Raw, [u32; LANES]>(self.0) }
+    }
+    #[inline(always)]
+    pub fn splat(v: u32) -> U8<A> {
+        avx_or!(A, U8(_mm256_castsi256_ps(_mm256_set1_epi32(v as i32))), U8::from_array([v; LANES]))
+    }
+    /// Lane-wise `f(a, b)` on the array views (portable build).
+    #[inline(always)]
+    fn zip(self, o: U8<A>, f: impl Fn(u32, u32) -> u32) -> U8<A> {
+        let (a, b) = (self.to_array(), o.to_array());
+        U8::from_array(per_lane(|i| f(a[i], b[i])))
+    }
+    /// `wrapping_add`.
+    #[inline(always)]
+    pub fn wrapping_add(self, o: U8<A>) -> U8<A> {
+        avx_or!(
+            A,
+            U8(_mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))),
+            self.zip(o, u32::wrapping_add)
+        )
+    }
+    /// `wrapping_mul`.
+    #[inline(always)]
+    pub fn wrapping_mul(self, o: U8<A>) -> U8<A> {
+        avx_or!(
+            A,
+            U8(_mm256_castsi256_ps(_mm256_mullo_epi32(
+                _mm256_castps_si256(self.0),
+                _mm256_castps_si256(o.0)
+            ))),
+            self.zip(o, u32::wrapping_mul)
+        )
+    }
+    #[inline(always)]
+    pub fn xor(self, o: U8<A>) -> U8<A> {
+        avx_or!(A, U8(_mm256_xor_ps(self.0, o.0)), self.zip(o, |a, b| a ^ b))
+    }
+    #[inline(always)]
+    pub fn and(self, o: U8<A>) -> U8<A> {
+        avx_or!(A, U8(_mm256_and_ps(self.0, o.0)), self.zip(o, |a, b| a & b))
+    }
+    /// `self << S`.
+    #[inline(always)]
+    pub fn shl<const S: i32>(self) -> U8<A> {
+        avx_or!(A, U8(_mm256_castsi256_ps(_mm256_slli_epi32::<S>(_mm256_castps_si256(self.0)))), {
+            let a = self.to_array();
+            U8::from_array(per_lane(|i| a[i] << S))
+        })
+    }
+    /// `self >> S` (logical).
+    #[inline(always)]
+    pub fn shr<const S: i32>(self) -> U8<A> {
+        avx_or!(A, U8(_mm256_castsi256_ps(_mm256_srli_epi32::<S>(_mm256_castps_si256(self.0)))), {
+            let a = self.to_array();
+            U8::from_array(per_lane(|i| a[i] >> S))
+        })
+    }
+    /// `u32::reverse_bits`: bytes swapped by one `vpshufb`, then each byte's nibbles
+    /// reversed and swapped by two table `vpshufb`.
+    #[inline(always)]
+    pub fn reverse_bits(self) -> U8<A> {
+        avx_or!(
+            A,
+            {
+                let x = _mm256_castps_si256(self.0);
+                let bswap = _mm256_setr_epi8(
+                    3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9,
+                    8, 15, 14, 13, 12,
+                );
+                let x = _mm256_shuffle_epi8(x, bswap);
+                let nib = _mm256_set1_epi8(0x0f);
+                let lo = _mm256_and_si256(x, nib);
+                let hi = _mm256_and_si256(_mm256_srli_epi16::<4>(x), nib);
+                let t_hi =
+                    _mm256_broadcastsi128_si256(_mm_loadu_si128(REV_NIBBLE_HI.as_ptr() as *const __m128i));
+                let t_lo =
+                    _mm256_broadcastsi128_si256(_mm_loadu_si128(REV_NIBBLE_LO.as_ptr() as *const __m128i));
+                let r = _mm256_or_si256(_mm256_shuffle_epi8(t_hi, lo), _mm256_shuffle_epi8(t_lo, hi));
+                U8(_mm256_castsi256_ps(r))
+            },
+            {
+                let a = self.to_array();
+                U8::from_array(per_lane(|i| a[i].reverse_bits()))
+            }
+        )
+    }
+    /// `to_unit_float`: `(x >> 8) as f32 * 2^-24` (exact: below 2^24).
+    #[inline(always)]
+    pub fn to_unit(self) -> F8<A> {
+        avx_or!(
+            A,
+            F8(_mm256_mul_ps(
+                _mm256_cvtepi32_ps(_mm256_srli_epi32::<8>(_mm256_castps_si256(self.0))),
+                _mm256_set1_ps(1.0 / 16_777_216.0)
+            )),
+            {
+                let a = self.to_array();
+                F8::from_array(per_lane(|i| (a[i] >> 8) as f32 * (1.0 / 16_777_216.0)))
+            }
+        )
+    }
+}
+
+/// `hash_combine(seed, v)` lane-wise (`seed ^ (v + 0x9e3779b9 + (seed << 6) + (seed >> 2))`).
+#[inline(always)]
+fn hash_combine8<const A: bool>(seed: U8<A>, v: U8<A>) -> U8<A> {
+    seed.xor(
+        v.wrapping_add(U8::splat(0x9e37_79b9)).wrapping_add(seed.shl::<6>()).wrapping_add(seed.shr::<2>()),
+    )
+}
+
+/// `hash_u32` lane-wise.
+#[inline(always)]
+fn hash_u32_8<const A: bool>(x: U8<A>) -> U8<A> {
+    let x = x.xor(x.shr::<16>());
+    let x = x.wrapping_mul(U8::splat(0x7feb_352d));
+    let x = x.xor(x.shr::<15>());
+    let x = x.wrapping_mul(U8::splat(0x846c_a68b));
+    x.xor(x.shr::<16>())
+}
+
+/// `laine_karras_permutation` lane-wise.
+#[inline(always)]
+fn laine_karras8<const A: bool>(x: U8<A>, seed: U8<A>) -> U8<A> {
+    let x = x.wrapping_add(seed);
+    let x = x.xor(x.wrapping_mul(U8::splat(0x6c50_b47c)));
+    let x = x.xor(x.wrapping_mul(U8::splat(0xb82f_1e52)));
+    let x = x.xor(x.wrapping_mul(U8::splat(0xc7af_e638)));
+    x.xor(x.wrapping_mul(U8::splat(0x8d22_f6e6)))
 }
 
 /// [`filtrace_core::sampler::Sampler`] for eight sample keys at once: lane `i` is the
 /// sampler of pixel key `key[i]` (a [`Sampler::pixel_key`]) and the common sample index.
 /// `next_2d(slot)` equals `Sampler::set_slot(slot); Sampler::next_2d()` of each lane, bit
-/// for bit (same integer hashes, lane-wise: `vpmulld`, shifts and xors; the byte tables of
-/// Sobol dimension 1 become gathers).
+/// for bit (same integer hashes, lane-wise: `vpmulld`, shifts and xors; bit reversals by
+/// `vpshufb`; the byte tables of Sobol dimension 1 become gathers).
+///
+/// `AVX2 = true` (only inside code compiled for AVX2, such as the AVX2 tile loop) uses the
+/// AVX2 instructions, `false` plain per-lane code.
 ///
 /// [`Sampler::pixel_key`]: filtrace_core::sampler::Sampler::pixel_key
 #[derive(Clone, Copy, Debug)]
-///
-/// `AVX2 = true` (only inside code compiled for AVX2, such as the AVX2 tile loop) looks up
-/// the Sobol byte tables with four `vpgatherdd` instead of 32 scalar loads.
 pub struct Sampler8<const AVX2: bool> {
-    pub key: [u32; LANES],
+    pub key: U8<AVX2>,
     index_rev: u32,
-}
-
-/// 0.32 fixed point to `[0, 1)` (as `filtrace_core::sampler::to_unit_float`).
-#[inline(always)]
-fn unit8<const A: bool>(x: [u32; LANES]) -> F8<A> {
-    F8::from_array(per_lane(|i| (x[i] >> 8) as f32 * (1.0 / 16_777_216.0)))
 }
 
 /// [`sobol_dim1_reversed`] of eight lanes: table gathers when `AVX2` (the caller must be
 /// code compiled with AVX2 enabled), else scalar lookups.
 #[inline(always)]
-fn sobol_dim1_reversed8<const AVX2: bool>(i_rev: [u32; LANES]) -> [u32; LANES] {
-    #[cfg(target_arch = "x86_64")]
-    if AVX2 {
-        // SAFETY: `AVX2 = true` is only instantiated inside the AVX2 tile loop, which runs
-        // after runtime detection of AVX2 (`Renderer::render_tile_lockstep`).
-        return unsafe { sobol_dim1_reversed8_avx2(i_rev) };
-    }
-    u8x(|i| sobol_dim1_reversed(i_rev[i]))
-}
-
-/// The four byte lookups of [`sobol_dim1_reversed`] as `vpgatherdd` (same table entries,
-/// so the same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-unsafe fn sobol_dim1_reversed8_avx2(i_rev: [u32; LANES]) -> [u32; LANES] {
-    use std::arch::x86_64::*;
-    let t = &SOBOL_DIM1_REV_TABLES;
-    let v = _mm256_loadu_si256(i_rev.as_ptr() as *const __m256i);
-    let ff = _mm256_set1_epi32(0xff);
-    let b0 = _mm256_and_si256(v, ff);
-    let b1 = _mm256_and_si256(_mm256_srli_epi32::<8>(v), ff);
-    let b2 = _mm256_and_si256(_mm256_srli_epi32::<16>(v), ff);
-    let b3 = _mm256_srli_epi32::<24>(v);
-    let g0 = _mm256_i32gather_epi32::<4>(t[0].as_ptr() as *const i32, b0);
-    let g1 = _mm256_i32gather_epi32::<4>(t[1].as_ptr() as *const i32, b1);
-    let g2 = _mm256_i32gather_epi32::<4>(t[2].as_ptr() as *const i32, b2);
-    let g3 = _mm256_i32gather_epi32::<4>(t[3].as_ptr() as *const i32, b3);
-    let r = _mm256_xor_si256(_mm256_xor_si256(g0, g1), _mm256_xor_si256(g2, g3));
-    let mut out = [0u32; LANES];
-    _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, r);
-    out
+fn sobol_dim1_reversed8<const A: bool>(i_rev: U8<A>) -> U8<A> {
+    avx_or!(
+        A,
+        {
+            let t = &SOBOL_DIM1_REV_TABLES;
+            let v = _mm256_castps_si256(i_rev.0);
+            let ff = _mm256_set1_epi32(0xff);
+            let b0 = _mm256_and_si256(v, ff);
+            let b1 = _mm256_and_si256(_mm256_srli_epi32::<8>(v), ff);
+            let b2 = _mm256_and_si256(_mm256_srli_epi32::<16>(v), ff);
+            let b3 = _mm256_srli_epi32::<24>(v);
+            // The byte indices are below 256, the tables 256 entries long.
+            let g0 = _mm256_i32gather_epi32::<4>(t[0].as_ptr() as *const i32, b0);
+            let g1 = _mm256_i32gather_epi32::<4>(t[1].as_ptr() as *const i32, b1);
+            let g2 = _mm256_i32gather_epi32::<4>(t[2].as_ptr() as *const i32, b2);
+            let g3 = _mm256_i32gather_epi32::<4>(t[3].as_ptr() as *const i32, b3);
+            U8(_mm256_castsi256_ps(_mm256_xor_si256(_mm256_xor_si256(g0, g1), _mm256_xor_si256(g2, g3))))
+        },
+        {
+            let a = i_rev.to_array();
+            U8::from_array(per_lane(|i| sobol_dim1_reversed(a[i])))
+        }
+    )
 }
 
 impl<const AVX2: bool> Sampler8<AVX2> {
     #[inline(always)]
     pub fn new(key: [u32; LANES], index: u32) -> Self {
-        Sampler8 { key, index_rev: index.reverse_bits() }
+        Sampler8 { key: U8::from_array(key), index_rev: index.reverse_bits() }
     }
 
     /// Per-lane seed of `slot` and the reversed shuffled index.
     #[inline(always)]
-    fn seed_and_index(&self, slot: u32) -> ([u32; LANES], [u32; LANES]) {
-        let seed = u8x(|i| hash_u32(hash_combine(self.key[i], slot)));
-        let i_rev = u8x(|i| laine_karras_permutation(self.index_rev, seed[i]));
+    fn seed_and_index(&self, slot: u32) -> (U8<AVX2>, U8<AVX2>) {
+        let seed = hash_u32_8(hash_combine8(self.key, U8::splat(slot)));
+        let i_rev = laine_karras8(U8::splat(self.index_rev), seed);
         (seed, i_rev)
     }
 
@@ -636,21 +827,17 @@ impl<const AVX2: bool> Sampler8<AVX2> {
     #[inline(always)]
     pub fn next_2d(&self, slot: u32) -> (F8<AVX2>, F8<AVX2>) {
         let (seed, i_rev) = self.seed_and_index(slot);
-        let x = u8x(|i| {
-            laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
-        });
-        let d1 = sobol_dim1_reversed8::<AVX2>(i_rev);
-        let y = u8x(|i| laine_karras_permutation(d1[i], hash_combine(seed[i], 1)).reverse_bits());
-        (unit8(x), unit8(y))
+        let x = laine_karras8(i_rev.reverse_bits(), hash_combine8(seed, U8::splat(0))).reverse_bits();
+        let d1 = sobol_dim1_reversed8(i_rev);
+        let y = laine_karras8(d1, hash_combine8(seed, U8::splat(1))).reverse_bits();
+        (x.to_unit(), y.to_unit())
     }
 
     /// The 1D sample of dimension slot `slot` of every lane (the `x` of `next_2d`).
     #[inline(always)]
     pub fn next_1d(&self, slot: u32) -> F8<AVX2> {
         let (seed, i_rev) = self.seed_and_index(slot);
-        unit8(u8x(|i| {
-            laine_karras_permutation(i_rev[i].reverse_bits(), hash_combine(seed[i], 0)).reverse_bits()
-        }))
+        laine_karras8(i_rev.reverse_bits(), hash_combine8(seed, U8::splat(0))).reverse_bits().to_unit()
     }
 }
 
@@ -703,6 +890,27 @@ mod tests {
             assert_eq!(n.lane(i), x.normalize());
             assert_eq!(d.lane(i), x.dot(x.normalize()));
             assert_eq!(a.max_element().lane(i), x.max_element());
+        }
+    }
+
+    #[test]
+    fn columns_transpose_rows() {
+        let table: Vec<f32> = (0..200).map(|k| k as f32 * 0.5 - 7.0).collect();
+        let start = [0usize, 17, 3, 192, 64, 65, 100, 8];
+        let portable = columns::<false>(&table, &start).unwrap();
+        for (j, c) in portable.iter().enumerate() {
+            for (i, &s) in start.iter().enumerate() {
+                assert_eq!(c.lane(i), table[s + j]);
+            }
+        }
+        assert!(columns::<false>(&table, &[193; LANES]).is_none());
+        assert!(columns::<false>(&table, &[usize::MAX; LANES]).is_none());
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let v = columns::<true>(&table, &start).unwrap();
+            for j in 0..8 {
+                assert_eq!(v[j].to_array(), portable[j].to_array());
+            }
         }
     }
 }

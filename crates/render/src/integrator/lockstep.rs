@@ -28,7 +28,7 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{bits, from_bits, per_lane, select, Sampler8, F8, LANES, M8, V8};
+use super::lanes::{bits, columns, from_bits, per_lane, select, Sampler8, F8, LANES, M8, V8};
 use super::path::visible_surface;
 use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
@@ -37,7 +37,10 @@ use super::{
 use crate::bsdf::SurfaceBsdf;
 use crate::camera::PinholeCamera;
 use crate::film::VisibleSurface;
-use crate::surface::{gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION};
+use crate::lights::AREA_FLOATS;
+use crate::surface::{
+    gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION, TRI_FLOATS,
+};
 use filtrace_accel::{Hit, HitPacket, RayPacket};
 use filtrace_core::sampling::power_heuristic;
 use filtrace_core::{Ray, Rgb, Vec2, Vec3};
@@ -171,9 +174,8 @@ fn lanes_of<const A: bool>(m: M8<A>) -> impl Iterator<Item = usize> {
 fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s: &mut Surf8<A>) -> M8<A> {
     // Per-lane loads into plain arrays, then one vector load each (setting lanes of a
     // vector value one by one goes through memory every time).
-    let mut p = [[[0.0f32; LANES]; 3]; 3];
-    let mut n = [[0.0f32; LANES]; 3];
-    let mut scale = [0.0f32; LANES];
+    // Rows of the plain lanes' triangle records (row 0 for the other lanes: read, unused).
+    let mut start = [0usize; LANES];
     let mut plain = 0u8;
     let mut scalar_ok = 0u8;
     let mut scalar = [None; LANES];
@@ -181,19 +183,11 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
     while b != 0 {
         let i = b.trailing_zeros() as usize;
         b &= b - 1;
-        match ctx.geometry.plain_record(hits.instance[i], hits.prim[i]) {
-            Some(r) => {
+        match ctx.geometry.plain_row(hits.instance[i], hits.prim[i]) {
+            Some((row, material)) => {
                 plain |= 1 << i;
-                for (c, pc) in r.p.iter().enumerate() {
-                    p[c][0][i] = pc.x;
-                    p[c][1][i] = pc.y;
-                    p[c][2][i] = pc.z;
-                }
-                n[0][i] = r.n.x;
-                n[1][i] = r.n.y;
-                n[2][i] = r.n.z;
-                scale[i] = r.scale;
-                s.material[i] = r.material;
+                start[i] = row * TRI_FLOATS;
+                s.material[i] = material;
             }
             None => {
                 let h = Hit {
@@ -213,9 +207,22 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
         s.instance[i] = hits.instance[i];
         s.prim[i] = hits.prim[i];
     }
-    let (p0, p1, p2) = (V8::from_arrays(&p[0]), V8::from_arrays(&p[1]), V8::from_arrays(&p[2]));
-    let n = V8::from_arrays(&n);
-    let scale = F8::from_array(scale);
+    // The records as lanes: words 0..8 and 6..14 of each row, transposed (a row lies in
+    // the table: `plain_row` indexed the record).
+    let (p0, p1, p2, n, scale) = if plain != 0 {
+        let words = ctx.geometry.tri_words();
+        let a = columns::<A>(words, &start).expect("triangle rows in the table");
+        let b = columns::<A>(words, &start.map(|s| s + 6)).expect("triangle rows in the table");
+        (
+            V8::new(a[0], a[1], a[2]),
+            V8::new(a[3], a[4], a[5]),
+            V8::new(a[6], a[7], b[2]),
+            V8::new(b[3], b[4], b[5]),
+            b[6],
+        )
+    } else {
+        (V8::default(), V8::default(), V8::default(), V8::default(), F8::default())
+    };
     // The lane version of `from_hit` (mesh without normals and uvs: n_s = n_g = winding).
     let (b1, b2) = (F8::from_array(hits.u), F8::from_array(hits.v));
     let b0 = F8::splat(1.0) - b1 - b2;
@@ -513,8 +520,8 @@ pub fn trace_group<const AVX2: bool>(
         let mut ls_pdf = [0.0f32; LANES];
         let mut ls_dist = [0.0f32; LANES];
         let mut pmf = [0.0f32; LANES];
-        let mut a_v = [[[0.0f32; LANES]; 3]; 4];
-        let mut a_area = [0.0f32; LANES];
+        // Rows of the chosen area lights in `area_words` (row 0 for the other lanes).
+        let mut a_start = [0usize; LANES];
         let u_sel = u_select.to_array();
         for i in lanes_of(act) {
             let (li, pm) = ctx.lights.select(u_sel[i]);
@@ -522,12 +529,8 @@ pub fn trace_group<const AVX2: bool>(
                 if let Some(a) = ctx.lights.area_light(li) {
                     area |= 1 << i;
                     pmf[i] = pm;
-                    for (k, v) in [a.p0, a.e1, a.e2, a.n].iter().enumerate() {
-                        (a_v[k][0][i], a_v[k][1][i], a_v[k][2][i]) = (v.x, v.y, v.z);
-                    }
-                    a_area[i] = a.area;
+                    a_start[i] = li * AREA_FLOATS;
                     a_two |= (a.two_sided as u8) << i;
-                    (ls_li[0][i], ls_li[1][i], ls_li[2][i]) = (a.le.x, a.le.y, a.le.z);
                     continue;
                 }
             }
@@ -547,18 +550,20 @@ pub fn trace_group<const AVX2: bool>(
         let ls_delta = from_bits::<AVX2>(ls_delta);
         let a_two = from_bits::<AVX2>(a_two);
         let mut ls_wi = V8::from_arrays(&ls_wi);
-        let ls_li = V8::from_arrays(&ls_li);
+        let mut ls_li = V8::from_arrays(&ls_li);
         let mut ls_pdf = F8::from_array(ls_pdf);
         let mut ls_dist = F8::from_array(ls_dist);
         let pmf = F8::from_array(pmf);
-        let (a_p0, a_e1, a_e2, a_n) = (
-            V8::from_arrays(&a_v[0]),
-            V8::from_arrays(&a_v[1]),
-            V8::from_arrays(&a_v[2]),
-            V8::from_arrays(&a_v[3]),
-        );
-        let a_area = F8::from_array(a_area);
         if area.any() {
+            // The chosen lights' rows as lanes (words 0..8 and 8..16, transposed; the rows
+            // exist: `area_light` found the lights).
+            let words = ctx.lights.area_words();
+            let a = columns::<AVX2>(words, &a_start).expect("area light rows in the table");
+            let b = columns::<AVX2>(words, &a_start.map(|s| s + 8)).expect("area light rows in the table");
+            let (a_p0, a_e1, a_e2) =
+                (V8::new(a[0], a[1], a[2]), V8::new(a[3], a[4], a[5]), V8::new(a[6], a[7], b[0]));
+            let (a_n, a_area) = (V8::new(b[1], b[2], b[3]), b[4]);
+            ls_li = V8::select(area, V8::new(b[5], b[6], b[7]), ls_li);
             // `AreaLight::sample` with `sample_uniform_triangle`.
             let m = F8::splat(0.5) * ulx.min(uly);
             let b0 = ulx - m;

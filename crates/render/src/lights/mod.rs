@@ -81,7 +81,13 @@ pub struct LightSet {
     env_index: u32,
     scene_radius: f32,
     skipped: usize,
+    /// Per light [`AREA_FLOATS`] words for the lockstep integrator ([`LightSet::area_words`]).
+    area_words: Vec<f32>,
 }
+
+/// Words per light in [`LightSet::area_words`]: `p0`, `e1`, `e2`, `n` (xyz each) at 0..12,
+/// the area at 12 and `le` (rgb) at 13..16 (zeros for a light that is not an area light).
+pub(crate) const AREA_FLOATS: usize = 16;
 
 impl LightSet {
     /// Gathers the emitters of `scene` (see the module docs). Malformed references (a
@@ -186,7 +192,26 @@ impl LightSet {
             }
         }
         set.selection = AliasTable::new(&powers);
+        for l in &set.lights {
+            match l {
+                LightKind::Area(a) => {
+                    for v in [a.p0, a.e1, a.e2, a.n] {
+                        set.area_words.extend_from_slice(&[v.x, v.y, v.z]);
+                    }
+                    set.area_words.push(a.area);
+                    set.area_words.extend_from_slice(&[a.le.x, a.le.y, a.le.z]);
+                }
+                _ => set.area_words.extend_from_slice(&[0.0; AREA_FLOATS]),
+            }
+        }
         set
+    }
+
+    /// The area lights as rows of [`AREA_FLOATS`] words (row `i` = light `i`), read as
+    /// lanes by the lockstep integrator: the values of [`LightSet::area_light`].
+    #[inline]
+    pub(crate) fn area_words(&self) -> &[f32] {
+        &self.area_words
     }
 
     /// No light can be sampled.

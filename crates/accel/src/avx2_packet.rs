@@ -27,7 +27,7 @@
 //! callers reach only when [`crate::Simd::Avx2`] is available; helpers are
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
-use crate::avx2::{any_zero, hit_distance, mixed_signs, sheared_edges};
+use crate::avx2::{any_zero, hit_distance, mixed_signs};
 use crate::packet::{FlatGroup, FlatNode, FlatTri, RayPacket, LANES};
 use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
@@ -317,18 +317,40 @@ unsafe fn corner_flat<const UNIFORM: bool>(
     ]
 }
 
-/// The watertight test of the triangle with permuted corners `a, b, c` against the eight
+/// Steps 1-2 of the watertight test for one permuted corner `v` of the eight lanes:
+/// translated, sheared and scaled `(x, y, S_z z)`, operation for operation as in
+/// `avx2::sheared_edges` (so bit-identical to the scalar test).
+#[inline(always)]
+unsafe fn shear([v0, v1, v2]: [__m256; 3], r: &Regs<'_>) -> [__m256; 3] {
+    let z = _mm256_sub_ps(v2, r.o[2]);
+    let x = _mm256_sub_ps(_mm256_sub_ps(v0, r.o[0]), _mm256_mul_ps(r.s[0], z));
+    let y = _mm256_sub_ps(_mm256_sub_ps(v1, r.o[1]), _mm256_mul_ps(r.s[1], z));
+    [x, y, _mm256_mul_ps(r.s[2], z)]
+}
+
+/// Step 3: the edge functions `U, V, W` of the sheared corners `a, b, c`, as in
+/// `avx2::sheared_edges`.
+#[inline(always)]
+unsafe fn edges(a: &[__m256; 3], b: &[__m256; 3], c: &[__m256; 3]) -> [__m256; 3] {
+    let u = _mm256_sub_ps(_mm256_mul_ps(c[0], b[1]), _mm256_mul_ps(c[1], b[0]));
+    let v = _mm256_sub_ps(_mm256_mul_ps(a[0], c[1]), _mm256_mul_ps(a[1], c[0]));
+    let w = _mm256_sub_ps(_mm256_mul_ps(b[0], a[1]), _mm256_mul_ps(b[1], a[0]));
+    [u, v, w]
+}
+
+/// The watertight test of the triangle with sheared corners `a, b, c` against the eight
 /// lanes, as `avx2::test8v` per lane: `(edge, reject, t, u, v)` where `edge` marks lanes
 /// with a zero edge function (their other results are meaningless: the caller redoes them
 /// with the scalar test). `act`: the lanes to test. `EARLY`: `None` when none of them can
 /// hit (all outside an edge).
 #[inline(always)]
-unsafe fn test_tri<const EARLY: bool>(
-    [a, b, c]: [[__m256; 3]; 3],
-    r: &Regs<'_>,
+unsafe fn test_sheared<const EARLY: bool>(
+    a: &[__m256; 3],
+    b: &[__m256; 3],
+    c: &[__m256; 3],
     act: __m256,
 ) -> Option<(__m256, __m256, __m256, __m256, __m256)> {
-    let (e, z) = sheared_edges(a, b, c, r.o, r.s);
+    let e = edges(a, b, c);
     let edge = _mm256_and_ps(act, any_zero(e));
     // Mixed signs: outside (no lane with a zero edge function gets here; see `test8v`).
     let reject = mixed_signs(e);
@@ -339,8 +361,18 @@ unsafe fn test_tri<const EARLY: bool>(
         // cost more than the division (-8 to -13 %).
         return None;
     }
-    let (t, u, v) = hit_distance(e, z);
+    let (t, u, v) = hit_distance(e, [a[2], b[2], c[2]]);
     Some((edge, reject, t, u, v))
+}
+
+/// [`test_sheared`] of the triangle with permuted corners `a, b, c`.
+#[inline(always)]
+unsafe fn test_tri<const EARLY: bool>(
+    [a, b, c]: [[__m256; 3]; 3],
+    r: &Regs<'_>,
+    act: __m256,
+) -> Option<(__m256, __m256, __m256, __m256, __m256)> {
+    test_sheared::<EARLY>(&shear(a, r), &shear(b, r), &shear(c, r), act)
 }
 
 /// Per-lane constants of the fused box test of 8 rays against one box, lane for lane
@@ -482,25 +514,48 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(
     while left != 0 {
         let g = &blas.flat_groups[left.trailing_zeros() as usize];
         left &= left - 1;
-        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
-            let corners = [
-                corner_flat::<UNIFORM>(tri, 0, r, k),
-                corner_flat::<UNIFORM>(tri, 1, r, k),
-                corner_flat::<UNIFORM>(tri, 2, r, k),
-            ];
-            // Uniform permutations are (almost only) coherent packets: skip divisions.
-            let Some((edge, reject, t, u, v)) = test_tri::<UNIFORM>(corners, r, r.act) else {
-                continue;
-            };
-            if _mm256_movemask_ps(edge) != 0 {
-                best.update_scalar(r.rays, r.active, &mut out, &tri.tri(), tri.id);
-                continue;
+        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+        let mut i = 0;
+        while i < tris.len() {
+            let tri = &tris[i];
+            let a = shear(corner_flat::<UNIFORM>(tri, 0, r, k), r);
+            let b = shear(corner_flat::<UNIFORM>(tri, 1, r, k), r);
+            let c = shear(corner_flat::<UNIFORM>(tri, 2, r, k), r);
+            closest_sheared::<UNIFORM>(&mut best, &mut out, r, tri, &a, &b, &c);
+            if tri.pair {
+                // The fan pair `(a, c, d)`: one more corner.
+                let next = &tris[i + 1];
+                let d = shear(corner_flat::<UNIFORM>(next, 2, r, k), r);
+                closest_sheared::<UNIFORM>(&mut best, &mut out, r, next, &a, &c, &d);
+                i += 1;
             }
-            best.update(t, u, v, reject, r.t_min, r.act, tri.id);
+            i += 1;
         }
     }
     best.store(&mut out);
     out
+}
+
+/// Closest-hit update of `best` with the triangle `tri` (sheared corners `a, b, c`).
+#[inline(always)]
+unsafe fn closest_sheared<const UNIFORM: bool>(
+    best: &mut Best8,
+    out: &mut Closest8,
+    r: &Regs<'_>,
+    tri: &FlatTri,
+    a: &[__m256; 3],
+    b: &[__m256; 3],
+    c: &[__m256; 3],
+) {
+    // Uniform permutations are (almost only) coherent packets: skip divisions.
+    let Some((edge, reject, t, u, v)) = test_sheared::<UNIFORM>(a, b, c, r.act) else {
+        return;
+    };
+    if _mm256_movemask_ps(edge) != 0 {
+        best.update_scalar(r.rays, r.active, out, &tri.tri(), tri.id);
+        return;
+    }
+    best.update(t, u, v, reject, r.t_min, r.act, tri.id);
 }
 
 /// One triangle against the lanes `active` with the scalar test, updating `out`.
@@ -549,32 +604,54 @@ unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usi
     while left != 0 {
         let g = &blas.flat_groups[left.trailing_zeros() as usize];
         left &= left - 1;
-        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
-            let corners = [
-                corner_flat::<UNIFORM>(tri, 0, &r, k),
-                corner_flat::<UNIFORM>(tri, 1, &r, k),
-                corner_flat::<UNIFORM>(tri, 2, &r, k),
-            ];
-            let Some((edge, reject, t, _, _)) = test_tri::<false>(corners, &r, act) else {
-                continue;
-            };
-            let hit = if _mm256_movemask_ps(edge) != 0 {
-                lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.tri()))
-            } else {
-                let in_range = _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max),
-                );
-                _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act)
-            };
+        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+        let mut i = 0;
+        while i < tris.len() {
+            let tri = &tris[i];
+            let a = shear(corner_flat::<UNIFORM>(tri, 0, &r, k), &r);
+            let b = shear(corner_flat::<UNIFORM>(tri, 1, &r, k), &r);
+            let c = shear(corner_flat::<UNIFORM>(tri, 2, &r, k), &r);
+            let hit = any_sheared(&r, tri, &a, &b, &c, act);
             occluded = _mm256_or_ps(occluded, hit);
             act = _mm256_andnot_ps(hit, act);
+            if tri.pair {
+                // The fan pair `(a, c, d)`: one more corner.
+                let next = &tris[i + 1];
+                let d = shear(corner_flat::<UNIFORM>(next, 2, &r, k), &r);
+                let hit = any_sheared(&r, next, &a, &c, &d, act);
+                occluded = _mm256_or_ps(occluded, hit);
+                act = _mm256_andnot_ps(hit, act);
+                i += 1;
+            }
+            i += 1;
         }
         if _mm256_movemask_ps(act) == 0 {
             break;
         }
     }
     _mm256_movemask_ps(occluded) as u32
+}
+
+/// Lanes of `act` that hit the triangle `tri` (sheared corners `a, b, c`) with `t` in
+/// `[t_min, t_max]`.
+#[inline(always)]
+unsafe fn any_sheared(
+    r: &Regs<'_>,
+    tri: &FlatTri,
+    a: &[__m256; 3],
+    b: &[__m256; 3],
+    c: &[__m256; 3],
+    act: __m256,
+) -> __m256 {
+    let Some((edge, reject, t, _, _)) = test_sheared::<false>(a, b, c, act) else {
+        return _mm256_setzero_ps();
+    };
+    if _mm256_movemask_ps(edge) != 0 {
+        return lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.tri()));
+    }
+    let in_range =
+        _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min), _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max));
+    _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act)
 }
 
 /// Lanes of `lanes` that hit `tri` (scalar test).

@@ -42,6 +42,9 @@ const MIN_LANES_ANY_BVH: u32 = 5;
 pub(crate) struct FlatTri {
     pub rows: [[f32; 4]; 3],
     pub id: u32,
+    /// This triangle `(a, b, c)` and the next one of its group are a fan pair `(a, c, d)`
+    /// (corners bit for bit equal): the two share the sheared corners `a` and `c`.
+    pub pair: bool,
 }
 
 impl FlatTri {
@@ -182,9 +185,21 @@ pub(crate) fn flat_layout(ids: &[u32], tris: &[crate::triangle::Tri]) -> (Vec<Fl
             first: flat.len() as u32,
             count: members.len() as u32,
         });
-        flat.extend(
-            members.iter().map(|&k| FlatTri { rows: tris[k].map(|[x, y, z]| [x, y, z, x]), id: ids[k] }),
-        );
+        let mut i = 0;
+        while i < members.len() {
+            let t = &tris[members[i]];
+            let next = members.get(i + 1).map(|&k| &tris[k]);
+            let bits = |p: &[f32; 3]| p.map(f32::to_bits);
+            let pair = next.is_some_and(|n| bits(&n[0]) == bits(&t[0]) && bits(&n[1]) == bits(&t[2]));
+            let tri =
+                |k: usize| FlatTri { rows: tris[k].map(|[x, y, z]| [x, y, z, x]), id: ids[k], pair: false };
+            flat.push(FlatTri { pair, ..tri(members[i]) });
+            if pair {
+                flat.push(tri(members[i + 1]));
+                i += 1;
+            }
+            i += 1;
+        }
     }
     (flat, out)
 }
@@ -541,6 +556,15 @@ mod flat_tests {
             }
         }
         assert!(seen.iter().all(|&n| n == 1));
+        // Fan pairs: the Cornell box is 18 quads split as (0, 1, 2), (0, 2, 3).
+        for g in &groups {
+            let members = &flat[g.first as usize..(g.first + g.count) as usize];
+            for (i, t) in members.iter().enumerate().filter(|(_, t)| t.pair) {
+                let n = members.get(i + 1).expect("a pair's second triangle in the same group");
+                assert!(!n.pair && n.rows[0] == t.rows[0] && n.rows[1] == t.rows[2]);
+            }
+        }
+        assert_eq!(flat.iter().filter(|t| t.pair).count(), 18);
         let sizes: Vec<u32> = groups.iter().map(|g| g.count).collect();
         println!("cornell groups: {sizes:?}");
         let boxes: Vec<_> = tris

@@ -68,7 +68,11 @@ impl RayBoxes8 {
             let c = origin[k] * inv[k];
             let e = c.abs() * (1.0 / (1u32 << 21) as f32) + 1e-30;
             (lo[k], hi[k]) = (c + e, c - e);
-            (near[k], far[k]) = if inv[k] >= 0.0 { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
+            // `inv[k] >= 0` exactly when `d` has no sign bit (`d` is never zero or NaN and
+            // `1 / d` never rounds to zero); testing `d` keeps the row offsets, which the
+            // first node's loads need, off the division's latency.
+            (near[k], far[k]) =
+                if d.is_sign_positive() { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
         }
         let splat = |v: [f32; 3]| v.map(|x| _mm256_set1_ps(x));
         Self { inv: splat(inv), oinv_near: splat(lo), oinv_far: splat(hi), near, far }

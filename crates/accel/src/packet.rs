@@ -305,10 +305,7 @@ impl SceneAccel {
                 }
             }
         }
-        let active = active & valid_lanes(rays);
-        if active == 0 {
-            return HitPacket::default();
-        }
+        // (The lane loops check each active lane's validity, as the single-ray queries do.)
         self.intersect_packet_lanes(rays, active)
     }
 
@@ -332,10 +329,6 @@ impl SceneAccel {
                     return o;
                 }
             }
-        }
-        let active = active & valid_lanes(rays);
-        if active == 0 {
-            return 0;
         }
         self.occluded_packet_lanes(rays, active)
     }
@@ -376,9 +369,12 @@ impl SceneAccel {
     #[target_feature(enable = "avx2,fma")]
     fn intersect_lanes_avx2(&self, rays: &RayPacket, active: u8) -> HitPacket {
         let mut out = HitPacket::default();
-        for i in 0..LANES {
+        let mut left = active;
+        while left != 0 {
+            let i = left.trailing_zeros() as usize;
+            left &= left - 1;
             let ray = rays.lane(i);
-            if active & (1 << i) != 0 && ray.is_valid() {
+            if ray.is_valid() {
                 out.set_lane(i, self.intersect_with::<true>(&ray));
             }
         }
@@ -392,9 +388,12 @@ impl SceneAccel {
     #[target_feature(enable = "avx2,fma")]
     fn occluded_lanes_avx2(&self, rays: &RayPacket, active: u8) -> u8 {
         let mut out = 0;
-        for i in 0..LANES {
+        let mut left = active;
+        while left != 0 {
+            let i = left.trailing_zeros() as usize;
+            left &= left - 1;
             let ray = rays.lane(i);
-            if active & (1 << i) != 0 && ray.is_valid() && self.occluded_with::<true>(&ray) {
+            if ray.is_valid() && self.occluded_with::<true>(&ray) {
                 out |= 1 << i;
             }
         }
@@ -450,16 +449,17 @@ impl SceneAccel {
                 avx2_packet::closest_bvh(blas, rays, active)?
             }
         };
+        // Without a branch per lane (whether a lane hit is a coin flip on some packets);
+        // lanes without a hit keep zeros, as `HitPacket::default`.
         for i in 0..LANES {
             let id = c.id.0[i];
-            if id == avx2_packet::NO_HIT {
-                continue;
-            }
-            let (instance, prim) =
-                if object == MERGED { self.merged_refs[id as usize] } else { (object, id as u32) };
-            out.mask |= 1 << i;
-            (out.t[i], out.u[i], out.v[i]) = (c.t.0[i], c.u.0[i], c.v.0[i]);
-            (out.instance[i], out.prim[i]) = (instance, prim);
+            let hit = id != avx2_packet::NO_HIT;
+            let k = if hit { id as u32 } else { 0 };
+            let (instance, prim) = if object == MERGED { self.merged_refs[k as usize] } else { (object, k) };
+            out.mask |= (hit as u8) << i;
+            let keep = |x: f32| if hit { x } else { 0.0 };
+            (out.t[i], out.u[i], out.v[i]) = (keep(c.t.0[i]), keep(c.u.0[i]), keep(c.v.0[i]));
+            (out.instance[i], out.prim[i]) = (if hit { instance } else { 0 }, if hit { prim } else { 0 });
         }
         Some(out)
     }

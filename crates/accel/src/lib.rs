@@ -157,6 +157,9 @@ struct Blas {
     flat_groups: Vec<packet::FlatGroup>,
     /// Flat bottom levels only: the groups of `packets` and their boxes, for single rays.
     flat_node: packet::FlatNode,
+    /// Flat bottom levels only: `bounds` padded as the group boxes (`packet::FLAT_BOX_PAD`),
+    /// the one box of the SSE kernel's flat queries.
+    flat_bounds: Aabb,
 }
 
 impl Blas {
@@ -220,6 +223,7 @@ impl Blas {
             flat_tris: Vec::new(),
             flat_groups: Vec::new(),
             flat_node: packet::FlatNode::default(),
+            flat_bounds: Aabb::EMPTY,
         }
     }
 
@@ -259,6 +263,7 @@ impl Blas {
             flat_tris,
             flat_groups,
             flat_node,
+            flat_bounds: packet::pad_box(&bounds, scale),
         }
     }
 
@@ -278,7 +283,7 @@ impl Blas {
             return unsafe { self.intersect8(o, d, t_min, t_max) };
         }
         if self.flat {
-            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.bounds) {
+            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.flat_bounds) {
                 return None;
             }
             let mut leaves = ClosestPackets {
@@ -354,7 +359,7 @@ impl Blas {
         let mut leaves =
             AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         if self.flat {
-            return wide::ray_touches_box(o, d, t_min, t_max, &self.bounds)
+            return wide::ray_touches_box(o, d, t_min, t_max, &self.flat_bounds)
                 && wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
         }
         let rb = RayBoxes::new(o, d);

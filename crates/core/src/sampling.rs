@@ -421,6 +421,14 @@ impl AliasTable {
         self.total <= 0.0
     }
 
+    /// Bin `i` as `(q, alias)` (`None` outside `0..count()`): [`AliasTable::sample`] keeps
+    /// cell `i` when the fraction of `u * count()` is below `q`, else returns `alias` (for
+    /// vectorised copies of `sample`).
+    #[inline]
+    pub fn bin(&self, i: usize) -> Option<(f32, u32)> {
+        self.bins.get(i).map(|b| (b.q, b.alias))
+    }
+
     /// Probability of choosing cell `i` (0 outside `0..count()`).
     #[inline]
     pub fn pmf(&self, i: usize) -> f32 {

@@ -94,6 +94,17 @@ fn lockstep_films_equal_scalar_films_with_every_feature() {
     assert_identical("lockstep_all_features.toml", &scene, 45, 30, 6);
 }
 
+/// A scene with eight lights of every kind: the lockstep integrator's in-lane light choice
+/// (`SmallLights`) with lanes that fall back to the per-lane code for other light kinds.
+#[test]
+fn lockstep_films_equal_scalar_films_with_few_lights() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_few_lights.toml");
+    let scene = filtrace_scene::toml_scene::load_toml(&path).unwrap();
+    let lights = filtrace_render::lights::LightSet::build(&scene);
+    assert!((2..=8).contains(&lights.len()), "{} lights", lights.len());
+    assert_identical("lockstep_few_lights.toml", &scene, 45, 30, 6);
+}
+
 /// The lane utilisation counters add up: every group counts its lanes, lanes alive only
 /// decrease with the vertex.
 #[test]

@@ -612,6 +612,91 @@ pub fn columns<const A: bool>(table: &[f32], start: &[usize; LANES]) -> Option<[
     Some(out)
 }
 
+/// `table[idx[i]]` for an eight-entry table (`idx` below 8): one `vpermps` with AVX2.
+#[inline(always)]
+pub fn lookup8<const A: bool>(table: &[f32; LANES], idx: U8<A>) -> F8<A> {
+    avx_or!(A, F8(_mm256_permutevar8x32_ps(_mm256_loadu_ps(table.as_ptr()), _mm256_castps_si256(idx.0))), {
+        let i = idx.to_array();
+        F8::from_array(per_lane(|k| table[i[k] as usize & 7]))
+    })
+}
+
+/// [`lookup8`] of a table of `u32` words.
+#[inline(always)]
+pub fn lookup8_u32<const A: bool>(table: &[u32; LANES], idx: U8<A>) -> U8<A> {
+    avx_or!(
+        A,
+        U8(_mm256_castsi256_ps(_mm256_permutevar8x32_epi32(
+            _mm256_loadu_si256(table.as_ptr() as *const __m256i),
+            _mm256_castps_si256(idx.0)
+        ))),
+        {
+            let i = idx.to_array();
+            U8::from_array(per_lane(|k| table[i[k] as usize & 7]))
+        }
+    )
+}
+
+/// Lanes of `m` whose word is not zero (words `u32::MAX` / 0, as [`lookup8_u32`] of a
+/// mask table returns them).
+#[inline(always)]
+pub fn mask_of<const A: bool>(m: U8<A>) -> M8<A> {
+    avx_or!(
+        A,
+        M8(_mm256_castsi256_ps(_mm256_xor_si256(
+            _mm256_cmpeq_epi32(_mm256_castps_si256(m.0), _mm256_setzero_si256()),
+            _mm256_set1_epi32(-1)
+        ))),
+        {
+            let a = m.to_array();
+            M8(raw_from_i(per_lane(|i| -((a[i] != 0) as i32))))
+        }
+    )
+}
+
+/// `(x as usize).min(n - 1)` per lane (`n` at most 8; truncation, NaN and negatives to 0).
+#[inline(always)]
+fn trunc_below8<const A: bool>(x: F8<A>, n: u32) -> U8<A> {
+    avx_or!(
+        A,
+        {
+            let t = _mm256_cvttps_epi32(x.0);
+            let t = _mm256_max_epi32(
+                _mm256_min_epi32(t, _mm256_set1_epi32(n as i32 - 1)),
+                _mm256_setzero_si256(),
+            );
+            U8(_mm256_castsi256_ps(t))
+        },
+        {
+            let xa = x.to_array();
+            U8::from_array(per_lane(|k| (xa[k] as usize).min(n as usize - 1) as u32))
+        }
+    )
+}
+
+/// `AliasTable::sample(u)` in lanes for a table of `n` cells, `1 <= n <= 8`, given by its
+/// `q`, `alias` and `pmf` words (`SmallLights`): `x = u * n`, `i = min(x as usize, n - 1)`,
+/// `f = x - i as f32`, `k = f < q[i] ? i : alias[i]` (the scalar operations, so the same
+/// cell), returned with `pmf[k]`. With AVX2 three `vpermps`, no per-lane code.
+#[inline(always)]
+pub fn alias_pick8<const A: bool>(
+    u: F8<A>,
+    n: u32,
+    q: &[f32; LANES],
+    alias: &[u32; LANES],
+    pmf: &[f32; LANES],
+) -> (U8<A>, F8<A>) {
+    debug_assert!((1..=8).contains(&n));
+    let x = u * F8::splat(n as f32);
+    let i = trunc_below8(x, n);
+    let i_f = i.to_f32();
+    let f = x - i_f;
+    let keep = f.lt(lookup8(q, i));
+    let al = lookup8_u32(alias, i);
+    let k = U8(select(keep, F8(i.0), F8(al.0)).0);
+    (k, lookup8(pmf, k))
+}
+
 /// Eight `u32` lanes (the sampler's integer hashes; `A` as for [`F8`]).
 #[derive(Clone, Copy, Debug)]
 #[repr(transparent)]
@@ -719,6 +804,14 @@ impl<const A: bool> U8<A> {
                 U8::from_array(per_lane(|i| a[i].reverse_bits()))
             }
         )
+    }
+    /// `x as f32` per lane for values below 2^31 (`vcvtdq2ps`).
+    #[inline(always)]
+    pub fn to_f32(self) -> F8<A> {
+        avx_or!(A, F8(_mm256_cvtepi32_ps(_mm256_castps_si256(self.0))), {
+            let a = self.to_array();
+            F8::from_array(per_lane(|i| a[i] as f32))
+        })
     }
     /// `to_unit_float`: `(x >> 8) as f32 * 2^-24` (exact: below 2^24).
     #[inline(always)]
@@ -910,6 +1003,39 @@ mod tests {
             let v = columns::<true>(&table, &start).unwrap();
             for j in 0..8 {
                 assert_eq!(v[j].to_array(), portable[j].to_array());
+            }
+        }
+    }
+
+    #[test]
+    fn alias_pick8_matches_alias_table_sample() {
+        use filtrace_core::sampling::AliasTable;
+        let weights = [3.0f32, 0.0, 1.5, 7.25, 0.5, 2.0, 0.0, 9.0];
+        for n in 1..=8usize {
+            let table = AliasTable::new(&weights[..n]);
+            let (mut q, mut alias, mut pmf) = ([0.0f32; LANES], [0u32; LANES], [0.0f32; LANES]);
+            for i in 0..n {
+                let (qi, ai) = table.bin(i).unwrap();
+                (q[i], alias[i], pmf[i]) = (qi, if n == 1 { 0 } else { ai }, table.pmf(i));
+            }
+            for step in 0..64u32 {
+                let u: [f32; LANES] =
+                    std::array::from_fn(|i| ((step * 8 + i as u32) as f32 * 0.618_034).fract());
+                let (k, pm) = alias_pick8::<false>(F8::from_array(u), n as u32, &q, &alias, &pmf);
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    let (k2, pm2) = alias_pick8::<true>(F8::from_array(u), n as u32, &q, &alias, &pmf);
+                    assert_eq!((k2.to_array(), pm2.to_array()), (k.to_array(), pm.to_array()));
+                }
+                for i in 0..LANES {
+                    let (ks, ps) = table.sample(u[i]);
+                    assert_eq!(
+                        (k.to_array()[i] as usize, pm.lane(i).to_bits()),
+                        (ks, ps.to_bits()),
+                        "n {n} u {}",
+                        u[i]
+                    );
+                }
             }
         }
     }

@@ -28,7 +28,10 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{bits, columns, from_bits, per_lane, select, Sampler8, F8, LANES, M8, V8};
+use super::lanes::{
+    alias_pick8, bits, columns, from_bits, lookup8, lookup8_u32, mask_of, per_lane, select, Sampler8, F8,
+    LANES, M8, V8,
+};
 use super::path::visible_surface;
 use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
@@ -523,7 +526,23 @@ pub fn trace_group<const AVX2: bool>(
         // Rows of the chosen area lights in `area_words` (row 0 for the other lanes).
         let mut a_start = [0usize; LANES];
         let u_sel = u_select.to_array();
-        for i in lanes_of(act) {
+        // With at most eight lights the choice and the area lights' data are lanes
+        // (`SmallLights`: the alias pick and one `vpermps` per field); only the lanes that
+        // chose another kind of light take the per-lane code.
+        let small = match ctx.lights.small_lights() {
+            Some(sl) => {
+                let (k, pm) = alias_pick8(u_select, sl.n, &sl.q, &sl.alias, &sl.pmf);
+                let chosen = act & pm.gt(zero);
+                let is_area = mask_of(lookup8_u32(&sl.is_area, k));
+                Some((sl, k, pm, chosen & is_area, chosen & !is_area))
+            }
+            None => None,
+        };
+        let per_lane_lights = match &small {
+            Some(sm) => sm.4,
+            None => act,
+        };
+        for i in lanes_of(per_lane_lights) {
             let (li, pm) = ctx.lights.select(u_sel[i]);
             if pm > 0.0 {
                 if let Some(a) = ctx.lights.area_light(li) {
@@ -545,21 +564,58 @@ pub fn trace_group<const AVX2: bool>(
                 ls_delta |= (ls.delta as u8) << i;
             }
         }
-        let area = from_bits::<AVX2>(area);
+        let (area, pmf) = match &small {
+            Some(sm) => (sm.3, sm.2),
+            None => (from_bits::<AVX2>(area), F8::from_array(pmf)),
+        };
         let mut ls_ok = from_bits::<AVX2>(ls_ok);
         let ls_delta = from_bits::<AVX2>(ls_delta);
-        let a_two = from_bits::<AVX2>(a_two);
         let mut ls_wi = V8::from_arrays(&ls_wi);
         let mut ls_li = V8::from_arrays(&ls_li);
         let mut ls_pdf = F8::from_array(ls_pdf);
         let mut ls_dist = F8::from_array(ls_dist);
-        let pmf = F8::from_array(pmf);
         if area.any() {
-            // The chosen lights' rows as lanes (words 0..8 and 8..16, transposed; the rows
-            // exist: `area_light` found the lights).
-            let words = ctx.lights.area_words();
-            let a = columns::<AVX2>(words, &a_start).expect("area light rows in the table");
-            let b = columns::<AVX2>(words, &a_start.map(|s| s + 8)).expect("area light rows in the table");
+            let (a, b, a_two) = match &small {
+                Some(sm) => {
+                    let (sl, k) = (sm.0, sm.1);
+                    // A macro, not a closure (closures do not inherit AVX2).
+                    macro_rules! field {
+                        ($j:expr) => {
+                            lookup8(&sl.field[$j], k)
+                        };
+                    }
+                    let a = [
+                        field!(0),
+                        field!(1),
+                        field!(2),
+                        field!(3),
+                        field!(4),
+                        field!(5),
+                        field!(6),
+                        field!(7),
+                    ];
+                    let b = [
+                        field!(8),
+                        field!(9),
+                        field!(10),
+                        field!(11),
+                        field!(12),
+                        field!(13),
+                        field!(14),
+                        field!(15),
+                    ];
+                    (a, b, mask_of(lookup8_u32(&sl.two_sided, k)))
+                }
+                None => {
+                    // The chosen lights' rows as lanes (words 0..8 and 8..16, transposed;
+                    // the rows exist: `area_light` found the lights).
+                    let words = ctx.lights.area_words();
+                    let a = columns::<AVX2>(words, &a_start).expect("area light rows in the table");
+                    let b = columns::<AVX2>(words, &a_start.map(|s| s + 8))
+                        .expect("area light rows in the table");
+                    (a, b, from_bits::<AVX2>(a_two))
+                }
+            };
             let (a_p0, a_e1, a_e2) =
                 (V8::new(a[0], a[1], a[2]), V8::new(a[3], a[4], a[5]), V8::new(a[6], a[7], b[0]));
             let (a_n, a_area) = (V8::new(b[1], b[2], b[3]), b[4]);

@@ -83,6 +83,55 @@ pub struct LightSet {
     skipped: usize,
     /// Per light [`AREA_FLOATS`] words for the lockstep integrator ([`LightSet::area_words`]).
     area_words: Vec<f32>,
+    /// The same for scenes with at most eight lights, as eight-entry tables.
+    small: Option<Box<SmallLights>>,
+}
+
+/// The selection table and the area lights of a scene with one to eight lights as
+/// eight-entry tables, one per field (lane `k` = light or cell `k`): the lockstep
+/// integrator looks them up with one `vpermps` per field ([`crate::integrator::lanes::
+/// lookup8`]), no per-lane code. The values are those [`AliasTable::sample`] and
+/// [`LightSet::area_light`] read.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SmallLights {
+    /// Number of cells (= lights).
+    pub(crate) n: u32,
+    /// Per cell: `q`, `alias` (0 for a single cell: `sample` returns cell 0), `pmf`.
+    pub(crate) q: [f32; 8],
+    pub(crate) alias: [u32; 8],
+    pub(crate) pmf: [f32; 8],
+    /// Per light: `u32::MAX` for an area light, else 0; the same for two-sided ones.
+    pub(crate) is_area: [u32; 8],
+    pub(crate) two_sided: [u32; 8],
+    /// Per field of [`LightSet::area_words`] (`AREA_FLOATS` of them): its value per light.
+    pub(crate) field: [[f32; 8]; AREA_FLOATS],
+}
+
+impl SmallLights {
+    fn new(set: &LightSet) -> Option<SmallLights> {
+        let n = set.selection.count();
+        if !(1..=8).contains(&n) || set.lights.len() != n {
+            return None;
+        }
+        let mut t = SmallLights { n: n as u32, ..Default::default() };
+        for i in 0..n {
+            let (q, alias) = set.selection.bin(i)?;
+            if alias as usize >= n {
+                return None;
+            }
+            t.q[i] = q;
+            t.alias[i] = if n == 1 { 0 } else { alias };
+            t.pmf[i] = set.selection.pmf(i);
+            if let LightKind::Area(a) = &set.lights[i] {
+                t.is_area[i] = u32::MAX;
+                t.two_sided[i] = if a.two_sided { u32::MAX } else { 0 };
+            }
+            for (f, w) in t.field.iter_mut().zip(&set.area_words[i * AREA_FLOATS..(i + 1) * AREA_FLOATS]) {
+                f[i] = *w;
+            }
+        }
+        Some(t)
+    }
 }
 
 /// Words per light in [`LightSet::area_words`]: `p0`, `e1`, `e2`, `n` (xyz each) at 0..12,
@@ -204,7 +253,14 @@ impl LightSet {
                 _ => set.area_words.extend_from_slice(&[0.0; AREA_FLOATS]),
             }
         }
+        set.small = SmallLights::new(&set).map(Box::new);
         set
+    }
+
+    /// [`SmallLights`] of scenes with one to eight lights.
+    #[inline]
+    pub(crate) fn small_lights(&self) -> Option<&SmallLights> {
+        self.small.as_deref()
     }
 
     /// The area lights as rows of [`AREA_FLOATS`] words (row `i` = light `i`), read as

@@ -1027,13 +1027,12 @@ mod tests {
                     let (k2, pm2) = alias_pick8::<true>(F8::from_array(u), n as u32, &q, &alias, &pmf);
                     assert_eq!((k2.to_array(), pm2.to_array()), (k.to_array(), pm.to_array()));
                 }
-                for i in 0..LANES {
-                    let (ks, ps) = table.sample(u[i]);
+                for (i, &ui) in u.iter().enumerate() {
+                    let (ks, ps) = table.sample(ui);
                     assert_eq!(
                         (k.to_array()[i] as usize, pm.lane(i).to_bits()),
                         (ks, ps.to_bits()),
-                        "n {n} u {}",
-                        u[i]
+                        "n {n} u {ui}"
                     );
                 }
             }

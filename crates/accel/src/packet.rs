@@ -119,6 +119,11 @@ pub(crate) fn pad_scale(b: &filtrace_core::Aabb) -> f32 {
     b.min.abs().max(b.max.abs()).max_element()
 }
 
+/// Most boxes [`cluster`] clusters exhaustively (flat bottom levels hold at most
+/// [`crate::BuildParams::max_flat_triangles`], 40 in every preset; a larger setting gets
+/// consecutive runs of triangles as groups beyond this count).
+const MAX_CLUSTERED: usize = 256;
+
 /// Agglomerative clustering of `boxes` by the surface area heuristic (Walter et al. 2008,
 /// "Fast agglomerative clustering for rendering"; exhaustive, for the few triangles of a
 /// flat bottom level): starting from one group per box, merges the pair of groups whose
@@ -131,6 +136,15 @@ pub(crate) fn cluster(
     cost: impl Fn(f32, usize) -> f32,
 ) -> Vec<(filtrace_core::Aabb, Vec<usize>)> {
     use filtrace_core::Aabb;
+    if boxes.len() > MAX_CLUSTERED {
+        // Exhaustive clustering is cubic in the count: consecutive runs instead.
+        let run = boxes.len().div_ceil(max_groups.max(1));
+        let runs = (0..boxes.len()).collect::<Vec<_>>();
+        return runs
+            .chunks(run)
+            .map(|c| (c.iter().map(|&i| boxes[i]).fold(Aabb::EMPTY, Aabb::union), c.to_vec()))
+            .collect();
+    }
     let root = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
     let root_area = root.surface_area().max(f32::MIN_POSITIVE);
     let sah = |b: &Aabb, n: usize| cost(b.surface_area() / root_area, n);
@@ -528,6 +542,20 @@ mod flat_tests {
             })
             .collect();
         ((0..tris.len() as u32).collect(), tris)
+    }
+
+    /// Beyond `MAX_CLUSTERED` boxes: consecutive runs, at most `max_groups` of them.
+    #[test]
+    fn many_boxes_cluster_into_runs() {
+        use filtrace_core::{Aabb, Vec3};
+        let boxes: Vec<Aabb> = (0..300)
+            .map(|i| Aabb::from_points([Vec3::splat(i as f32), Vec3::splat(i as f32 + 1.0)]))
+            .collect();
+        let groups = cluster(&boxes, MAX_FLAT_GROUPS, |p, n| p * n as f32);
+        assert!(groups.len() <= MAX_FLAT_GROUPS);
+        let all: Vec<usize> = groups.iter().flat_map(|g| g.1.iter().copied()).collect();
+        assert_eq!(all, (0..300).collect::<Vec<_>>());
+        assert!(groups.iter().all(|g| g.1.iter().all(|&i| g.0.union(boxes[i]) == g.0)));
     }
 
     /// Every triangle lands in exactly one group whose padded box holds it; groups hold

@@ -109,3 +109,31 @@ fn cornell_wall_rays_hit_as_brute_force() {
     // The rays mean something: most hit, and some shadow segments are blocked.
     assert!(hits > rays.len() / 2 && occluded > rays.len() / 2, "{hits} hits, {occluded} occluded");
 }
+
+/// A flat bottom level of 2k triangles (`max_flat_triangles` raised: groups are runs of
+/// triangles then) answers as brute force.
+#[test]
+fn large_flat_mesh_hits_as_brute_force() {
+    let mut scene = filtrace_scene::Scene::default();
+    scene.add_mesh(filtrace_accel::testmesh::displaced_sphere(18, 0.1));
+    assert!(scene.triangle_count() > 1000);
+    let brute = BruteForce::build(&scene);
+    let params = BuildParams { max_flat_triangles: usize::MAX, ..BuildParams::default() };
+    let accel = SceneAccel::build_with(&scene, &params);
+    let mut rng = SplitMix64(3);
+    let rays: Vec<Ray> = (0..2000)
+        .map(|_| {
+            Ray::new(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0 - 1.5, rng.unit_vector())
+        })
+        .collect();
+    for chunk in rays.chunks(LANES) {
+        let (p, all) = RayPacket::from_rays(chunk);
+        let (h, o) = (accel.intersect_packet(&p, all), accel.occluded_packet(&p, all));
+        for (i, r) in chunk.iter().enumerate() {
+            let e = bits(brute.intersect(r));
+            assert_eq!(bits(accel.intersect(r)), e, "{r:?}");
+            assert_eq!(bits(h.lane(i)), e, "{r:?}");
+            assert_eq!(o & (1 << i) != 0, brute.occluded(r), "{r:?}");
+        }
+    }
+}

@@ -2,9 +2,11 @@
 //! [`crate::SceneAccel::occluded_packet`] on a scene of one object).
 //!
 //! - **Flat bottom levels** (at most [`crate::BuildParams::max_flat_triangles`]
-//!   triangles, the Cornell box): every triangle is tested against all active rays at
-//!   once, one ray per lane (8 rays x 1 triangle per instruction), instead of one ray
-//!   against two 4-triangle packets.
+//!   triangles, the Cornell box): the group boxes (`packet::flat_layout`) are tested
+//!   against the 8 rays first (8 rays x 1 box, branch-free, a mask of the groups some
+//!   lane touches); then each triangle of the touched groups against all active rays at
+//!   once, one ray per lane (8 rays x 1 triangle per instruction), fan pairs `(a, b, c),
+//!   (a, c, d)` sharing their two common sheared corners.
 //! - **8-wide BVHs**, for coherent packets (all active lanes with the same direction signs
 //!   and watertight permutation, directions within [`MAX_SPREAD`]: camera tiles): one
 //!   traversal for the packet, each child

@@ -30,7 +30,7 @@
 
 use super::lanes::{
     alias_pick8, bits, columns, from_bits, lookup8, lookup8_u32, mask_of, per_lane, select, Sampler8, F8,
-    LANES, M8, V8,
+    LANES, M8, U8, V8,
 };
 use super::path::visible_surface;
 use super::{
@@ -42,7 +42,8 @@ use crate::camera::PinholeCamera;
 use crate::film::VisibleSurface;
 use crate::lights::AREA_FLOATS;
 use crate::surface::{
-    gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION, TRI_FLOATS,
+    gamma, SurfaceInteraction, MAT_DIFFUSE, MAT_EMITS, MAT_TWO_SIDED, OFFSET_FLOOR, OFFSET_SAFETY,
+    SHADOW_END_FRACTION, TRI_FLOATS,
 };
 use filtrace_accel::{Hit, HitPacket, RayPacket};
 use filtrace_core::sampling::power_heuristic;
@@ -434,8 +435,26 @@ pub fn trace_group<const AVX2: bool>(
         stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.count() as u64;
         stats.bounces += 1;
 
+        // The material flags and Lambert reflectances of the lanes by table lookups when
+        // the scene has at most eight materials (else every lane looks its material up).
+        let small_mats = match ctx.geometry.small_materials() {
+            Some(sm) => {
+                let id = U8::from_array(si.material);
+                Some((lookup8_u32(&sm.flags, id), sm, id))
+            }
+            None => None,
+        };
+
         // Emitted radiance at the vertex (per lane: few lanes hit an emitter).
-        for i in lanes_of(act) {
+        let emitting = match &small_mats {
+            Some((flags, ..)) => {
+                let emits = mask_of(flags.and(U8::splat(MAT_EMITS)));
+                let two = mask_of(flags.and(U8::splat(MAT_TWO_SIDED)));
+                act & emits & (si.front_face | two)
+            }
+            None => act,
+        };
+        for i in lanes_of(emitting) {
             let m = &materials[si.material[i] as usize];
             if !(m.is_emissive() && (si.front_face.get(i) || m.two_sided_emission)) {
                 continue;
@@ -475,7 +494,11 @@ pub fn trace_group<const AVX2: bool>(
         let mut diffuse = 0u8;
         let mut lobe = 0u8;
         let mut rho = [[0.0f32; LANES]; 3];
-        for i in lanes_of(act) {
+        let const_diffuse = match &small_mats {
+            Some((flags, ..)) => act & mask_of(flags.and(U8::splat(MAT_DIFFUSE))),
+            None => M8::none(),
+        };
+        for i in lanes_of(act & !const_diffuse) {
             // Untextured Lambert (most surfaces): its reflectance only, no BSDF record.
             if let Some(r) = ctx.geometry.constant_diffuse(si.material[i]) {
                 diffuse |= 1 << i;
@@ -493,8 +516,15 @@ pub fn trace_group<const AVX2: bool>(
             }
             bsdf[i] = Some(b);
         }
-        let (diffuse, lobe) = (from_bits::<AVX2>(diffuse), from_bits::<AVX2>(lobe));
-        let rho = V8::from_arrays(&rho);
+        let (diffuse, lobe) = (const_diffuse | from_bits::<AVX2>(diffuse), from_bits::<AVX2>(lobe));
+        let rho = match &small_mats {
+            Some((_, sm, id)) => V8::select(
+                const_diffuse,
+                V8::new(lookup8(&sm.rho[0], *id), lookup8(&sm.rho[1], *id), lookup8(&sm.rho[2], *id)),
+                V8::from_arrays(&rho),
+            ),
+            None => V8::from_arrays(&rho),
+        };
         let glossy = act & !diffuse;
         let (fx, fy) = frame_from_z(si.n_s);
         let n = si.n_s;

@@ -156,7 +156,9 @@ struct Blas {
     flat: bool,
     /// Flat bottom levels only: the triangles as the 8-ray packet kernels read them,
     /// grouped (`flat_groups`, boxes tested before the triangles; `packet::flat_layout`).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     flat_tris: Vec<packet::FlatTri>,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     flat_groups: Vec<packet::FlatGroup>,
     /// Flat bottom levels only: the groups of `packets` and their boxes, for single rays.
     flat_node: packet::FlatNode,

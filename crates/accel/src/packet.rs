@@ -39,6 +39,7 @@ const MIN_LANES_ANY_BVH: u32 = 5;
 /// per coordinate), and its id (a `prim_ids` value). One cache line.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
 pub(crate) struct FlatTri {
     pub rows: [[f32; 4]; 3],
     pub id: u32,
@@ -47,6 +48,7 @@ pub(crate) struct FlatTri {
     pub pair: bool,
 }
 
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
 impl FlatTri {
     /// The corners as the scalar watertight test takes them.
     pub fn tri(&self) -> crate::triangle::Tri {
@@ -60,6 +62,7 @@ impl FlatTri {
 /// z, 0, 0]`.
 #[repr(C, align(32))]
 #[derive(Clone, Copy, Debug)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
 pub(crate) struct FlatGroup {
     pub bounds: [f32; 8],
     pub first: u32,
@@ -89,6 +92,7 @@ pub(crate) const FLAT_BOX_COST: f32 = 0.3;
 /// packets. Rows of `bounds`: min x, y, z, max x, y, z; unused slots have empty boxes.
 #[repr(C, align(32))]
 #[derive(Clone, Copy, Debug)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
 pub(crate) struct FlatNode {
     pub bounds: [[f32; 8]; 6],
     pub first: [u32; 8],

@@ -5,11 +5,14 @@
 //!
 //! Per bounce, for the lanes still alive (`act`): emission found by the previous BSDF
 //! sample (MIS against light sampling), the sampler (eight keys per integer instruction,
-//! [`Sampler8`]), shading frames, next-event estimation (light selection per lane, area
-//! lights sampled in lanes, one packet of shadow rays, BSDF value and density in lanes for
-//! diffuse surfaces), BSDF sampling (cosine hemisphere in lanes for diffuse surfaces),
-//! Russian roulette, and one packet of closest-hit queries followed by the hit records
-//! (`from_hit` in lanes for meshes without vertex attributes).
+//! [`Sampler8`]), shading frames, next-event estimation (light selection in lanes for
+//! scenes with at most eight lights, else per lane; area lights sampled in lanes, one packet
+//! of shadow rays, BSDF value and density in lanes for diffuse surfaces), BSDF sampling
+//! (cosine hemisphere in lanes for diffuse surfaces), Russian roulette, and one packet of
+//! closest-hit queries followed by the hit records (`from_hit` in lanes for meshes without
+//! vertex attributes: the triangle records are loaded as rows and transposed). Material
+//! flags and Lambert reflectances are table lookups in lanes for scenes with at most eight
+//! materials.
 //!
 //! **Exactness is the contract.** Every lane performs the operations of
 //! [`super::path::li`] / [`super::path::trace_from_hit`] in the same order (see

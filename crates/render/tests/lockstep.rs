@@ -94,6 +94,19 @@ fn lockstep_films_equal_scalar_films_with_every_feature() {
     assert_identical("lockstep_all_features.toml", &scene, 45, 30, 6);
 }
 
+/// The every-feature scene with more than eight materials (unused copies appended): the
+/// per-lane material lookups (`SmallMaterials` only covers up to eight).
+#[test]
+fn lockstep_films_equal_scalar_films_with_many_materials() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_all_features.toml");
+    let mut scene = filtrace_scene::toml_scene::load_toml(&path).unwrap();
+    while scene.materials.len() <= 8 {
+        let m = scene.materials[0].clone();
+        scene.materials.push(m);
+    }
+    assert_identical("lockstep_all_features.toml + materials", &scene, 45, 30, 4);
+}
+
 /// A scene with eight lights of every kind: the lockstep integrator's in-lane light choice
 /// (`SmallLights`) with lanes that fall back to the per-lane code for other light kinds.
 #[test]

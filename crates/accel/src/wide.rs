@@ -148,7 +148,10 @@ impl RayBoxes {
         let mut far = [0; 3];
         for k in 0..3 {
             inv[k] = 1.0 / dir[k];
-            (near[k], far[k]) = if inv[k] >= 0.0 { (k, k + 3) } else { (k + 3, k) };
+            // `inv[k] >= 0` exactly when `dir[k]` has no sign bit (valid rays have no NaN
+            // components and `1 / d` never rounds to zero); testing `dir` keeps the rows
+            // off the division's latency (as `avx2::RayBoxes8`).
+            (near[k], far[k]) = if dir[k].is_sign_positive() { (k, k + 3) } else { (k + 3, k) };
         }
         Self { org: origin.to_array(), inv, near, far }
     }

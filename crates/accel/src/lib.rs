@@ -195,6 +195,12 @@ impl Blas {
             Simd::Sse => params.leaf_block,
             Simd::Avx2 => 2 * params.leaf_block,
         };
+        // Node boxes padded as the flat group boxes: the watertight test rounds `t` near a
+        // plane by up to a few ulps of the coordinates, so a ray starting a hair behind a
+        // wall can hit it at `t = -0.0`, outside the wall's unpadded (flat) box; brute force
+        // reports that hit, so the boxes must not cull it (tests/flat_culling.rs).
+        let scale = packet::pad_scale(&boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union));
+        let boxes: Vec<Aabb> = boxes.iter().map(|b| packet::pad_box(b, scale)).collect();
         let (root, order) = sah::build_binary(&boxes, &BuildParams { leaf_block: block, ..params.clone() });
         let Some(root) = root else { return Self::default() };
         let mut packets = Vec::new();

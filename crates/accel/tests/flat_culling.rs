@@ -3,7 +3,8 @@
 //! test and the watertight test's rounding disagree most easily: origins on the walls'
 //! planes and a few ulps to a thousandth of a unit off them (as a renderer spawns its
 //! rays, `t_min = 0`), grazing directions, and shadow segments that end just short of the
-//! light. Single rays, 8-ray packets with every lane count, both kernels.
+//! light. Single rays, 8-ray packets with every lane count, both kernels, the flat bottom
+//! level and a BVH over the same triangles.
 
 use filtrace_accel::testmesh::SplitMix64;
 use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, LANES};
@@ -84,8 +85,12 @@ fn cornell_wall_rays_hit_as_brute_force() {
     let kernels: Vec<Simd> = [Simd::Sse, Simd::Avx2].into_iter().filter(|k| k.available()).collect();
     let mut rng = SplitMix64(17);
     let (mut hits, mut occluded) = (0, 0);
-    for &k in &kernels {
-        let accel = SceneAccel::build_simd(&scene, &BuildParams::default(), k);
+    // The flat bottom level, and a BVH over the same 36 triangles (its node boxes must
+    // be as conservative as the group boxes).
+    let flat = BuildParams::default();
+    let bvh = BuildParams { max_flat_triangles: 0, ..BuildParams::default() };
+    for (k, params) in kernels.iter().flat_map(|&k| [(k, &flat), (k, &bvh)]) {
+        let accel = SceneAccel::build_simd(&scene, params, k);
         let expect: Vec<_> = rays.iter().map(|r| (bits(brute.intersect(r)), brute.occluded(r))).collect();
         for (r, e) in rays.iter().zip(&expect) {
             assert_eq!(bits(accel.intersect(r)), e.0, "{k:?} {r:?}");

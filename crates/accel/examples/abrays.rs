@@ -11,9 +11,8 @@
 //! an optimistic bound and is not comparable with `raybench`'s or Embree's numbers.
 
 use filtrace_accel::bench::{incoherent_rays, primary_rays};
-use filtrace_accel::{testmesh, SceneAccel};
+use filtrace_accel::SceneAccel;
 use filtrace_core::Ray;
-use filtrace_scene::Scene;
 
 #[repr(C)]
 struct Timespec {
@@ -68,14 +67,7 @@ fn main() -> Result<(), String> {
         return Err("--repeats and --block must be positive".into());
     }
     let spec = spec.ok_or("usage: abrays MESH [--repeats K] [--block N]")?;
-    let scene = if let Some(n) = spec.strip_prefix("sphere:") {
-        let n: usize = n.parse().map_err(|e| format!("sphere:N: {e}"))?;
-        let mut s = Scene { name: format!("displaced_sphere_{n}"), ..Scene::default() };
-        s.add_mesh(testmesh::displaced_sphere(n, 0.1));
-        s
-    } else {
-        filtrace_scene::load_scene(&spec).map_err(|e| e.to_string())?
-    };
+    let scene = filtrace_accel::bench::bench_scene(&spec)?;
     let accel = SceneAccel::build(&scene);
     let primary = primary_rays(&scene, 1024, 1024);
     let incoherent = incoherent_rays(&scene, 1 << 20, 7);

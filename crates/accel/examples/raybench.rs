@@ -8,7 +8,6 @@
 //! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
 
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
-use filtrace_accel::testmesh;
 use filtrace_scene::Scene;
 use std::io::Write;
 
@@ -40,14 +39,7 @@ fn main() -> Result<(), String> {
         }
     }
     let spec = spec.ok_or("usage: raybench SCENE [options]")?;
-    let scene = if let Some(n) = spec.strip_prefix("sphere:") {
-        let n: usize = n.parse().map_err(|e| format!("sphere:N: {e}"))?;
-        let mut s = Scene { name: format!("displaced_sphere_{n}"), ..Scene::default() };
-        s.add_mesh(testmesh::displaced_sphere(n, 0.1));
-        s
-    } else {
-        filtrace_scene::load_scene(&spec).map_err(|e| e.to_string())?
-    };
+    let scene = filtrace_accel::bench::bench_scene(&spec)?;
     if let Some(path) = write_obj {
         write_world_obj(&scene, &path).map_err(|e| format!("{path}: {e}"))?;
     }

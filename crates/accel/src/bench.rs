@@ -177,6 +177,18 @@ impl RayBenchReport {
     }
 }
 
+/// The scene a benchmark driver names: `sphere:N` for `testmesh::displaced_sphere(N, 0.1)`
+/// (`sphere:150` has 270k triangles), else a scene file or built-in scene name.
+pub fn bench_scene(spec: &str) -> Result<Scene, String> {
+    let Some(n) = spec.strip_prefix("sphere:") else {
+        return filtrace_scene::load_scene(spec).map_err(|e| e.to_string());
+    };
+    let n: usize = n.parse().map_err(|e| format!("sphere:N: {e}"))?;
+    let mut s = Scene { name: format!("displaced_sphere_{n}"), ..Scene::default() };
+    s.add_mesh(crate::testmesh::displaced_sphere(n, 0.1));
+    Ok(s)
+}
+
 /// Tight world-space bounds of every instanced triangle corner. (`Scene::bounds` boxes the
 /// transformed object boxes, which is looser for rotated instances; the Embree script
 /// uses the tight box, so the benchmark does too.)

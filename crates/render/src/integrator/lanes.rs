@@ -22,7 +22,6 @@
 //! functions or methods (a closure or an out-of-line helper does not inherit the AVX2
 //! target feature of its caller and would compile to SSE or to a call per operation).
 
-use filtrace_core::sampler::{sobol_dim1_reversed, SOBOL_DIM1_REV_TABLES};
 use filtrace_core::Vec3;
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
@@ -862,7 +861,7 @@ fn laine_karras8<const A: bool>(x: U8<A>, seed: U8<A>) -> U8<A> {
 /// sampler of pixel key `key[i]` (a [`Sampler::pixel_key`]) and the common sample index.
 /// `next_2d(slot)` equals `Sampler::set_slot(slot); Sampler::next_2d()` of each lane, bit
 /// for bit (same integer hashes, lane-wise: `vpmulld`, shifts and xors; bit reversals by
-/// `vpshufb`; the byte tables of Sobol dimension 1 become gathers).
+/// `vpshufb`; Sobol dimension 1 by five shift-and-xor steps, [`sobol_dim1_reversed8`]).
 ///
 /// `AVX2 = true` (only inside code compiled for AVX2, such as the AVX2 tile loop) uses the
 /// AVX2 instructions, `false` plain per-lane code.
@@ -874,32 +873,21 @@ pub struct Sampler8<const AVX2: bool> {
     index_rev: u32,
 }
 
-/// [`sobol_dim1_reversed`] of eight lanes: table gathers when `AVX2` (the caller must be
-/// code compiled with AVX2 enabled), else scalar lookups.
+/// [`filtrace_core::sampler::sobol_dim1_reversed`] of eight lanes, from the unreversed index `idx`
+/// (`= i_rev.reverse_bits()`, which the `x` of `next_2d` needs anyway). Column `i` of Sobol
+/// dimension 1 has bit `31 - j` set iff `C(i, j)` is odd, i.e. (Lucas) iff the bits of `j`
+/// are a subset of those of `i`; so bit `j` of the reversed result is the XOR of the index
+/// bits `i` that are supersets of `j`: the superset-sum transform over the 5-bit bit
+/// positions, five shift-and-xor steps (the four byte-table gathers they replace are
+/// microcoded on Zen 4).
 #[inline(always)]
-fn sobol_dim1_reversed8<const A: bool>(i_rev: U8<A>) -> U8<A> {
-    avx_or!(
-        A,
-        {
-            let t = &SOBOL_DIM1_REV_TABLES;
-            let v = _mm256_castps_si256(i_rev.0);
-            let ff = _mm256_set1_epi32(0xff);
-            let b0 = _mm256_and_si256(v, ff);
-            let b1 = _mm256_and_si256(_mm256_srli_epi32::<8>(v), ff);
-            let b2 = _mm256_and_si256(_mm256_srli_epi32::<16>(v), ff);
-            let b3 = _mm256_srli_epi32::<24>(v);
-            // The byte indices are below 256, the tables 256 entries long.
-            let g0 = _mm256_i32gather_epi32::<4>(t[0].as_ptr() as *const i32, b0);
-            let g1 = _mm256_i32gather_epi32::<4>(t[1].as_ptr() as *const i32, b1);
-            let g2 = _mm256_i32gather_epi32::<4>(t[2].as_ptr() as *const i32, b2);
-            let g3 = _mm256_i32gather_epi32::<4>(t[3].as_ptr() as *const i32, b3);
-            U8(_mm256_castsi256_ps(_mm256_xor_si256(_mm256_xor_si256(g0, g1), _mm256_xor_si256(g2, g3))))
-        },
-        {
-            let a = i_rev.to_array();
-            U8::from_array(per_lane(|i| sobol_dim1_reversed(a[i])))
-        }
-    )
+fn sobol_dim1_reversed8<const A: bool>(idx: U8<A>) -> U8<A> {
+    let x = idx;
+    let x = x.xor(x.shr::<1>().and(U8::splat(0x5555_5555)));
+    let x = x.xor(x.shr::<2>().and(U8::splat(0x3333_3333)));
+    let x = x.xor(x.shr::<4>().and(U8::splat(0x0f0f_0f0f)));
+    let x = x.xor(x.shr::<8>().and(U8::splat(0x00ff_00ff)));
+    x.xor(x.shr::<16>())
 }
 
 impl<const AVX2: bool> Sampler8<AVX2> {
@@ -920,8 +908,9 @@ impl<const AVX2: bool> Sampler8<AVX2> {
     #[inline(always)]
     pub fn next_2d(&self, slot: u32) -> (F8<AVX2>, F8<AVX2>) {
         let (seed, i_rev) = self.seed_and_index(slot);
-        let x = laine_karras8(i_rev.reverse_bits(), hash_combine8(seed, U8::splat(0))).reverse_bits();
-        let d1 = sobol_dim1_reversed8(i_rev);
+        let idx = i_rev.reverse_bits();
+        let x = laine_karras8(idx, hash_combine8(seed, U8::splat(0))).reverse_bits();
+        let d1 = sobol_dim1_reversed8(idx);
         let y = laine_karras8(d1, hash_combine8(seed, U8::splat(1))).reverse_bits();
         (x.to_unit(), y.to_unit())
     }
@@ -937,7 +926,7 @@ impl<const AVX2: bool> Sampler8<AVX2> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use filtrace_core::sampler::Sampler;
+    use filtrace_core::sampler::{sobol_dim1_reversed, Sampler};
 
     #[test]
     fn sampler8_matches_the_scalar_sampler() {
@@ -966,6 +955,24 @@ mod tests {
                     assert_eq!(one.lane(i).to_bits(), s.next_1d().to_bits());
                 }
             }
+        }
+    }
+
+    #[test]
+    fn sobol_dim1_reversed8_matches_the_byte_tables() {
+        let mut x = 0x1234_5678u32;
+        let mut vals: Vec<u32> = vec![0, 1, u32::MAX, 1 << 31, 0x8000_0001];
+        vals.extend((0..32).map(|b| 1u32 << b));
+        for _ in 0..4096 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            vals.push(x);
+        }
+        for c in vals.chunks(LANES) {
+            let r: [u32; LANES] = std::array::from_fn(|i| c.get(i).copied().unwrap_or(7));
+            let got = sobol_dim1_reversed8(U8::<false>::from_array(r.map(u32::reverse_bits))).to_array();
+            assert_eq!(got, r.map(sobol_dim1_reversed));
         }
     }
 

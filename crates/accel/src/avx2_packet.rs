@@ -101,23 +101,14 @@ impl Best8 {
         }
     }
 
-    /// Takes the hits `(t, u, v)` of triangle `id` in the lanes `act` not rejected and in
-    /// `[t_min, self.t]`: closer means `t < self.t`, or `t == self.t` and a smaller id.
+    /// Takes the hits `(t, u, v)` of triangle `id` in the lanes not rejected and in
+    /// `[t_min_act, self.t]` (`t_min_act`: NaN in the lanes not to update): closer means
+    /// `t < self.t`, or `t == self.t` and a smaller id.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn update(
-        &mut self,
-        t: __m256,
-        u: __m256,
-        v: __m256,
-        reject: __m256,
-        t_min: __m256,
-        act: __m256,
-        id: u32,
-    ) {
+    unsafe fn update(&mut self, t: __m256, u: __m256, v: __m256, reject: __m256, t_min_act: __m256, id: u32) {
         let in_range =
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, t_min), _mm256_cmp_ps::<_CMP_LE_OQ>(t, self.t));
-        let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act);
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, t_min_act), _mm256_cmp_ps::<_CMP_LE_OQ>(t, self.t));
+        let hit = _mm256_andnot_ps(reject, in_range);
         let idv = _mm256_set1_epi32(id as i32);
         let smaller_id = _mm256_castsi256_ps(_mm256_cmpgt_epi32(self.id, idv));
         let closer = _mm256_and_ps(hit, _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(t, self.t), smaller_id));
@@ -161,6 +152,8 @@ struct Regs<'a> {
     t_max: __m256,
     /// All ones in active lanes.
     act: __m256,
+    /// `t_min` in active lanes, NaN in the others (no `t` compares `>=` to it).
+    t_min_act: __m256,
     /// `kx, ky, kz` per lane (shuffle indices).
     kidx: [__m256i; 3],
     /// All active lanes share this permutation.
@@ -275,6 +268,7 @@ unsafe fn setup(rays: &RayPacket, active: u32) -> Regs<'_> {
         t_min,
         t_max,
         act,
+        t_min_act: _mm256_blendv_ps(_mm256_set1_ps(f32::NAN), t_min, act),
         uniform: uniform.then(|| [axis(bits[0]), axis(bits[1]), axis(bits[2])]),
     }
 }
@@ -549,15 +543,25 @@ unsafe fn closest_sheared<const UNIFORM: bool>(
     b: &[__m256; 3],
     c: &[__m256; 3],
 ) {
-    // Uniform permutations are (almost only) coherent packets: skip divisions.
-    let Some((edge, reject, t, u, v)) = test_sheared::<UNIFORM>(a, b, c, r.act) else {
+    let e = edges(a, b, c);
+    // Mixed signs: outside (no lane with a zero edge function gets here; see `test8v`).
+    let reject = mixed_signs(e);
+    // Lanes with a zero edge function (the active ones are checked as a bit mask: the
+    // vector `act` need not stay in a register).
+    let edge = any_zero(e);
+    if UNIFORM
+        && _mm256_movemask_ps(_mm256_or_ps(_mm256_andnot_ps(reject, r.act), _mm256_and_ps(r.act, edge))) == 0
+    {
+        // Uniform permutations are (almost only) coherent packets: skip the division when
+        // no lane is inside (see `test_sheared`).
         return;
-    };
-    if _mm256_movemask_ps(edge) != 0 {
+    }
+    let (t, u, v) = hit_distance(e, [a[2], b[2], c[2]]);
+    if _mm256_movemask_ps(edge) as u32 & r.active != 0 {
         best.update_scalar(r.rays, r.active, out, &tri.tri(), tri.id);
         return;
     }
-    best.update(t, u, v, reject, r.t_min, r.act, tri.id);
+    best.update(t, u, v, reject, r.t_min_act, tri.id);
 }
 
 /// One triangle against the lanes `active` with the scalar test, updating `out`.
@@ -893,6 +897,7 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
             }
         } else {
             let act = lane_mask(cur.lanes);
+            let t_min_act = _mm256_blendv_ps(_mm256_set1_ps(f32::NAN), r.t_min, act);
             for j in cur.child as usize..(cur.child + cur.count) as usize {
                 let tri = &blas.packets[j];
                 for l in 0..4 {
@@ -912,7 +917,7 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
                         best.update_scalar(r.rays, cur.lanes, &mut out, &tri.lane(l), id);
                         continue;
                     }
-                    best.update(t, u, v, reject, r.t_min, act, id);
+                    best.update(t, u, v, reject, t_min_act, id);
                 }
             }
         }

@@ -371,6 +371,23 @@ unsafe fn test_tri<const EARLY: bool>(
     test_sheared::<EARLY>(&shear(a, r), &shear(b, r), &shear(c, r), act)
 }
 
+/// One axis of the conservative slab test, lane for lane as `avx2::RayBoxes8::new`:
+/// `(inv, o inv + e, o inv - e)` with `inv = 1 / d` (components of `d` below 1e-30 in
+/// magnitude replaced by +-1e-30) and `e` the rounding slack of `o inv`.
+#[inline(always)]
+unsafe fn slab(o: __m256, d: __m256) -> (__m256, __m256, __m256) {
+    let sign = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MIN));
+    let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let tiny = _mm256_set1_ps(1e-30);
+    let small = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(d, abs), tiny);
+    let d = _mm256_blendv_ps(d, _mm256_or_ps(_mm256_and_ps(d, sign), tiny), small);
+    let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
+    let c = _mm256_mul_ps(o, inv);
+    let e =
+        _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(c, abs), _mm256_set1_ps(1.0 / (1u32 << 21) as f32)), tiny);
+    (inv, _mm256_add_ps(c, e), _mm256_sub_ps(c, e))
+}
+
 /// Per-lane constants of the fused box test of 8 rays against one box, lane for lane
 /// those of `avx2::RayBoxes8::new` (the BVH's conservative slab test: `b * inv - (o * inv
 /// +- e)`); unlike [`Boxes8`] each lane picks its own near and far planes, so the rays
@@ -386,25 +403,12 @@ struct LaneBoxes {
 impl LaneBoxes {
     #[inline(always)]
     unsafe fn new(rays: &RayPacket) -> Self {
-        let sign = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MIN));
-        let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
-        let tiny = _mm256_set1_ps(1e-30);
         let zero = _mm256_setzero_ps();
         let mut b = Self { inv: [zero; 3], oinv_near: [zero; 3], oinv_far: [zero; 3], neg: [zero; 3] };
         for k in 0..3 {
-            let (o, d) = (ld(&rays.origin[k]), ld(&rays.dir[k]));
-            // `d` with components below 1e-30 in magnitude replaced by +-1e-30.
-            let small = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(d, abs), tiny);
-            let d = _mm256_blendv_ps(d, _mm256_or_ps(_mm256_and_ps(d, sign), tiny), small);
-            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
-            let c = _mm256_mul_ps(o, inv);
-            let e = _mm256_add_ps(
-                _mm256_mul_ps(_mm256_and_ps(c, abs), _mm256_set1_ps(1.0 / (1u32 << 21) as f32)),
-                tiny,
-            );
+            let inv;
+            (inv, b.oinv_near[k], b.oinv_far[k]) = slab(ld(&rays.origin[k]), ld(&rays.dir[k]));
             b.inv[k] = inv;
-            b.oinv_near[k] = _mm256_add_ps(c, e);
-            b.oinv_far[k] = _mm256_sub_ps(c, e);
             b.neg[k] = _mm256_cmp_ps::<_CMP_LT_OQ>(inv, zero);
         }
         b
@@ -697,9 +701,6 @@ impl Boxes8 {
                 return None;
             }
         }
-        let sign = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MIN));
-        let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
-        let tiny = _mm256_set1_ps(1e-30);
         let mut b = Self {
             inv: [_mm256_setzero_ps(); 3],
             oinv_near: [_mm256_setzero_ps(); 3],
@@ -708,19 +709,9 @@ impl Boxes8 {
             far: [0; 3],
         };
         for k in 0..3 {
-            let (o, d) = (ld(&rays.origin[k]), ld(&rays.dir[k]));
-            // `d` with components below 1e-30 in magnitude replaced by +-1e-30.
-            let small = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(d, abs), tiny);
-            let d = _mm256_blendv_ps(d, _mm256_or_ps(_mm256_and_ps(d, sign), tiny), small);
-            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
-            let c = _mm256_mul_ps(o, inv);
-            let e = _mm256_add_ps(
-                _mm256_mul_ps(_mm256_and_ps(c, abs), _mm256_set1_ps(1.0 / (1u32 << 21) as f32)),
-                tiny,
-            );
+            let inv;
+            (inv, b.oinv_near[k], b.oinv_far[k]) = slab(ld(&rays.origin[k]), ld(&rays.dir[k]));
             b.inv[k] = inv;
-            b.oinv_near[k] = _mm256_add_ps(c, e);
-            b.oinv_far[k] = _mm256_sub_ps(c, e);
             let pos =
                 _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(inv, _mm256_setzero_ps())) as u32 & active;
             (b.near[k], b.far[k]) = if pos == active {

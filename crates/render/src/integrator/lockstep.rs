@@ -32,10 +32,11 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
 use super::lanes::{
-    alias_pick8, bits, columns, from_bits, lookup8, lookup8_u32, mask_of, per_lane, select, Sampler8, F8,
-    LANES, M8, U8, V8,
+    alias_pick8, bits, columns, from_bits, lookup8, lookup8_u32, mask_of, per_lane, select, F8, LANES, M8,
+    U8, V8,
 };
 use super::path::visible_surface;
+use super::sampler8::Sampler8;
 use super::{
     vertex_slot, CameraSample, PathContext, PathParams, Split, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT,
     SLOT_PIXEL, SLOT_RR,

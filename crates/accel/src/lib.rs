@@ -162,9 +162,6 @@ struct Blas {
     flat_groups: Vec<packet::FlatGroup>,
     /// Flat bottom levels only: the groups of `packets` and their boxes, for single rays.
     flat_node: packet::FlatNode,
-    /// Flat bottom levels only: `bounds` padded as the group boxes (`packet::FLAT_BOX_PAD`),
-    /// the one box of the SSE kernel's flat queries.
-    flat_bounds: Aabb,
 }
 
 impl Blas {
@@ -185,6 +182,12 @@ impl Blas {
         if ids.is_empty() {
             return Self::default();
         }
+        // Boxes padded for every layout (flat groups and BVH nodes): the watertight test
+        // rounds `t` near a plane by up to a few ulps of the coordinates, so a ray starting
+        // a hair behind a wall can hit it at `t = -0.0`, outside the wall's unpadded (flat)
+        // box; brute force reports that hit, so the boxes must not cull it
+        // (tests/flat_culling.rs).
+        let boxes = packet::padded_boxes(&boxes);
         if ids.len() <= params.max_flat_triangles {
             return Self::build_flat(&ids, &boxes, tri);
         }
@@ -195,12 +198,6 @@ impl Blas {
             Simd::Sse => params.leaf_block,
             Simd::Avx2 => 2 * params.leaf_block,
         };
-        // Node boxes padded as the flat group boxes: the watertight test rounds `t` near a
-        // plane by up to a few ulps of the coordinates, so a ray starting a hair behind a
-        // wall can hit it at `t = -0.0`, outside the wall's unpadded (flat) box; brute force
-        // reports that hit, so the boxes must not cull it (tests/flat_culling.rs).
-        let scale = packet::pad_scale(&boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union));
-        let boxes: Vec<Aabb> = boxes.iter().map(|b| packet::pad_box(b, scale)).collect();
         let (root, order) = sah::build_binary(&boxes, &BuildParams { leaf_block: block, ..params.clone() });
         let Some(root) = root else { return Self::default() };
         let mut packets = Vec::new();
@@ -234,7 +231,6 @@ impl Blas {
             flat_tris: Vec::new(),
             flat_groups: Vec::new(),
             flat_node: packet::FlatNode::default(),
-            flat_bounds: Aabb::EMPTY,
         }
     }
 
@@ -245,12 +241,9 @@ impl Blas {
     /// testing every triangle.
     fn build_flat(ids: &[u32], boxes: &[Aabb], tri: impl Fn(usize) -> [Vec3; 3]) -> Self {
         let tris: Vec<triangle::Tri> = ids.iter().map(|&i| tri(i as usize).map(|v| v.to_array())).collect();
-        let bounds = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
-        let scale = packet::pad_scale(&bounds);
         let mut flat_node = packet::FlatNode::default();
         let (mut packets, mut prim_ids) = (Vec::new(), Vec::new());
         for (g, (b, members)) in packet::flat_node_groups(boxes).iter().enumerate() {
-            let b = packet::pad_box(b, scale);
             for k in 0..3 {
                 flat_node.bounds[k][g] = b.min[k];
                 flat_node.bounds[k + 3][g] = b.max[k];
@@ -262,19 +255,18 @@ impl Blas {
             }
             flat_node.count[g] = packets.len() as u32 - flat_node.first[g];
         }
-        let (flat_tris, flat_groups) = packet::flat_layout(ids, &tris);
+        let (flat_tris, flat_groups) = packet::flat_layout(ids, &tris, boxes);
         Self {
             nodes: Vec::new(),
             nodes8: Vec::new(),
             packets,
             prim_ids,
             tri_count: ids.len(),
-            bounds,
+            bounds: boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union),
             flat: true,
             flat_tris,
             flat_groups,
             flat_node,
-            flat_bounds: packet::pad_box(&bounds, scale),
         }
     }
 
@@ -294,7 +286,7 @@ impl Blas {
             return unsafe { self.intersect8(o, d, t_min, t_max) };
         }
         if self.flat {
-            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.flat_bounds) {
+            if !wide::ray_touches_box(o, d, t_min, *t_max, &self.bounds) {
                 return None;
             }
             let mut leaves = ClosestPackets {
@@ -370,7 +362,7 @@ impl Blas {
         let mut leaves =
             AnyPacket { packets: &self.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         if self.flat {
-            return wide::ray_touches_box(o, d, t_min, t_max, &self.flat_bounds)
+            return wide::ray_touches_box(o, d, t_min, t_max, &self.bounds)
                 && wide::Leaves::visit(&mut leaves, 0, self.packets.len() as u32, &mut t_max);
         }
         let rb = RayBoxes::new(o, d);

@@ -112,15 +112,12 @@ pub(crate) fn flat_node_groups(boxes: &[filtrace_core::Aabb]) -> Vec<(filtrace_c
     cluster(boxes, 8, |p, n| p * n.div_ceil(8) as f32)
 }
 
-/// `b` grown by [`FLAT_BOX_PAD`] of `scale` on every side.
-pub(crate) fn pad_box(b: &filtrace_core::Aabb, scale: f32) -> filtrace_core::Aabb {
-    let pad = filtrace_core::Vec3::splat(scale * FLAT_BOX_PAD);
-    filtrace_core::Aabb { min: b.min - pad, max: b.max + pad }
-}
-
-/// The largest coordinate magnitude of `b` (the scale of [`FLAT_BOX_PAD`]).
-pub(crate) fn pad_scale(b: &filtrace_core::Aabb) -> f32 {
-    b.min.abs().max(b.max.abs()).max_element()
+/// `boxes`, each grown on every side by [`FLAT_BOX_PAD`] of the largest coordinate
+/// magnitude of all of them.
+pub(crate) fn padded_boxes(boxes: &[filtrace_core::Aabb]) -> Vec<filtrace_core::Aabb> {
+    let root = boxes.iter().copied().fold(filtrace_core::Aabb::EMPTY, filtrace_core::Aabb::union);
+    let pad = Vec3::splat(root.min.abs().max(root.max.abs()).max_element() * FLAT_BOX_PAD);
+    boxes.iter().map(|b| filtrace_core::Aabb { min: b.min - pad, max: b.max + pad }).collect()
 }
 
 /// Most boxes [`cluster`] clusters exhaustively (flat bottom levels hold at most
@@ -187,17 +184,18 @@ pub(crate) fn cluster(
 /// `sum over groups (FLAT_BOX_COST + n_g area_g / area_root)` most, until no merge
 /// lowers it (and at most [`MAX_FLAT_GROUPS`] remain). The two triangles of a quad share
 /// a box and merge first; walls, blocks and the light of the Cornell box stay apart.
-/// Groups are stored in the order of their smallest id, triangles in id order.
-pub(crate) fn flat_layout(ids: &[u32], tris: &[crate::triangle::Tri]) -> (Vec<FlatTri>, Vec<FlatGroup>) {
-    use filtrace_core::{Aabb, Vec3};
-    let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t.map(Vec3::from_array))).collect();
-    let root = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
-    let groups = cluster(&boxes, MAX_FLAT_GROUPS, |p, n| FLAT_BOX_COST + p * n as f32);
-    let scale = pad_scale(&root);
+/// Groups are stored in the order of their smallest id, triangles in id order. `boxes`:
+/// the triangles' boxes as [`padded_boxes`] pads them (the group boxes are their unions).
+pub(crate) fn flat_layout(
+    ids: &[u32],
+    tris: &[crate::triangle::Tri],
+    boxes: &[filtrace_core::Aabb],
+) -> (Vec<FlatTri>, Vec<FlatGroup>) {
+    let groups = cluster(boxes, MAX_FLAT_GROUPS, |p, n| FLAT_BOX_COST + p * n as f32);
     let mut flat = Vec::with_capacity(tris.len());
     let mut out = Vec::with_capacity(groups.len());
     for (b, members) in &groups {
-        let Aabb { min: lo, max: hi } = pad_box(b, scale);
+        let (lo, hi) = (b.min, b.max);
         out.push(FlatGroup {
             bounds: [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, 0.0, 0.0],
             first: flat.len() as u32,
@@ -534,6 +532,7 @@ mod tests {
 mod flat_tests {
     use super::*;
     use crate::triangle::Tri;
+    use filtrace_core::Aabb;
 
     fn cornell() -> (Vec<u32>, Vec<Tri>) {
         let scene = filtrace_scene::builtin("cornell").expect("cornell");
@@ -567,7 +566,8 @@ mod flat_tests {
     #[test]
     fn flat_layout_partitions_the_cornell_box() {
         let (ids, tris) = cornell();
-        let (flat, groups) = flat_layout(&ids, &tris);
+        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t.map(Vec3::from_array))).collect();
+        let (flat, groups) = flat_layout(&ids, &tris, &padded_boxes(&boxes));
         assert_eq!(flat.len(), tris.len());
         assert!(groups.len() > 4 && groups.len() <= MAX_FLAT_GROUPS, "{} groups", groups.len());
         let mut seen = vec![0; tris.len()];

@@ -33,8 +33,11 @@
 //! no hierarchy: their triangles fall into a few groups (SAH-clustered: walls, blocks and
 //! light of the Cornell box apart) whose padded boxes are tested before the triangles
 //! (`packet::flat_layout`; boxes only cull, the hits stay those of testing every triangle).
-//! Measurements against Embree 4: `docs/perf-accel.md` (1 thread, incoherent closest
-//! hits: 1.07x Embree on the 270k sphere, 0.97-1.01x on the bunny).
+//! Triangle boxes are padded a little (`packet::padded_boxes`) so that no box culls a hit
+//! the watertight test's rounding puts just outside it. Measurements against Embree 4:
+//! `docs/perf-accel.md` and `docs/performance.md` (1 thread, incoherent closest hits,
+//! idle, 2026-11-23 18:40 UTC: 1.02-1.10x Embree on the bunny, about even on the 270k
+//! sphere).
 //!
 //! **Closest hits do not depend on traversal order**: among hits at the same `t` the
 //! smallest `(instance, prim)` wins in every kernel (shared edges, coincident triangles),

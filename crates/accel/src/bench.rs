@@ -267,6 +267,43 @@ pub fn shadow_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
         .collect()
 }
 
+/// Rays as a path tracer's bounces cast them: from the hits of [`incoherent_rays`] on
+/// the surfaces of `scene` (`accel` built from it), each origin moved off its surface by
+/// `1.6e-6` of the scene's extent along the geometric normal (the renderer's offset), as
+/// `(bounce, shadow)`: a bounce ray into the hemisphere of that side (`t` in `[0, inf)`),
+/// and a shadow segment to a point of the quad of [`shadow_rays`] (`t` in
+/// `[0, 1 - 10^-4]`). Consecutive rays come from unrelated points (incoherent packets).
+pub fn surface_rays(scene: &Scene, accel: &SceneAccel, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
+    let b = triangle_bounds(scene);
+    let e = b.extent();
+    let offset = 1.6e-6 * e.max_element();
+    let light = Vec3::new(b.center().x, b.max.y - 0.01 * e.y, b.center().z);
+    let mut rng = SplitMix64(seed ^ 0xB0B0);
+    let (mut bounce, mut shadow) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for ray in incoherent_rays(scene, 2 * n, seed) {
+        if bounce.len() == n {
+            break;
+        }
+        let Some(hit) = accel.intersect(&ray) else { continue };
+        let inst = &scene.instances[hit.instance as usize];
+        let [p0, p1, p2] = scene.meshes[inst.mesh as usize].triangle(hit.prim as usize);
+        let [p0, p1, p2] = [p0, p1, p2].map(|p| inst.transform.transform_point3(p));
+        let mut normal = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        if normal.dot(ray.dir) > 0.0 {
+            normal = -normal;
+        }
+        let o = ray.origin + ray.dir * hit.t + normal * offset;
+        let mut d = rng.unit_vector();
+        if d.dot(normal) < 0.0 {
+            d = -d;
+        }
+        bounce.push(Ray::new(o, d));
+        let q = light + Vec3::new(rng.next_f32() - 0.5, 0.0, rng.next_f32() - 0.5) * 0.2 * e;
+        shadow.push(Ray::segment(o, q - o, 0.0, 1.0 - 1e-4));
+    }
+    (bounce, shadow)
+}
+
 /// Groups `rays` into packets of eight consecutive rays (the last one partial).
 pub fn packets_of(rays: &[Ray]) -> Vec<(RayPacket, u8)> {
     rays.chunks(LANES).map(RayPacket::from_rays).collect()

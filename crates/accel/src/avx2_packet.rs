@@ -5,8 +5,13 @@
 //!   triangles, the Cornell box): the group boxes (`packet::flat_layout`) are tested
 //!   against the 8 rays first (8 rays x 1 box, branch-free, a mask of the groups some
 //!   lane touches); then each triangle of the touched groups against all active rays at
-//!   once, one ray per lane (8 rays x 1 triangle per instruction), fan pairs `(a, b, c),
-//!   (a, c, d)` sharing their two common sheared corners.
+//!   once, one ray per lane (8 rays x 1 triangle per instruction). Meshes of at most
+//!   [`MAX_FLAT_VERTS`] distinct vertices (`packet::FlatVerts`; the Cornell box has 28 for
+//!   72 corners of its quads) shear each vertex the touched groups need once per packet
+//!   into a table on the stack (`ShearedVerts`), and the triangle loop reads its corners
+//!   from there: the per-lane permutation, origin and shear no longer compete with the
+//!   running closest hit for the 16 vector registers. Larger ones shear per triangle, fan
+//!   pairs `(a, b, c), (a, c, d)` sharing their two common sheared corners.
 //! - **8-wide BVHs**, for coherent packets (all active lanes with the same direction signs
 //!   and watertight permutation, directions within [`MAX_SPREAD`]: camera tiles): one
 //!   traversal for the packet, each child
@@ -30,7 +35,7 @@
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
 use crate::avx2::{any_zero, hit_distance, mixed_signs};
-use crate::packet::{FlatGroup, FlatNode, FlatTri, RayPacket, LANES};
+use crate::packet::{FlatGroup, FlatNode, FlatTri, RayPacket, VertRow, LANES, MAX_FLAT_VERTS};
 use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
@@ -38,6 +43,7 @@ use crate::wide::Node8;
 use crate::wide::{CULL_SCALE, FAR_SCALE};
 use crate::Blas;
 use filtrace_core::Vec3;
+use std::mem::MaybeUninit;
 
 /// Packet traversal stack depth: each 8-wide level pushes at most seven entries.
 const STACK8: usize = 7 * MAX_DEPTH + 8;
@@ -313,6 +319,21 @@ unsafe fn corner_flat<const UNIFORM: bool>(
     ]
 }
 
+/// A vertex permuted per lane, as [`corner_flat`].
+#[inline(always)]
+unsafe fn corner_row<const UNIFORM: bool>(row: &VertRow, r: &Regs<'_>, k: [usize; 3]) -> [__m256; 3] {
+    if UNIFORM {
+        return [_mm256_set1_ps(row.0[k[0]]), _mm256_set1_ps(row.0[k[1]]), _mm256_set1_ps(row.0[k[2]])];
+    }
+    // SAFETY: `VertRow` is 16-byte aligned, 16 bytes.
+    let row = _mm256_broadcast_ps(unsafe { &*(row.0.as_ptr() as *const __m128) });
+    [
+        _mm256_permutevar_ps(row, r.kidx[0]),
+        _mm256_permutevar_ps(row, r.kidx[1]),
+        _mm256_permutevar_ps(row, r.kidx[2]),
+    ]
+}
+
 /// Steps 1-2 of the watertight test for one permuted corner `v` of the eight lanes:
 /// translated, sheared and scaled `(x, y, S_z z)`, operation for operation as in
 /// `avx2::sheared_edges` (so bit-identical to the scalar test).
@@ -494,10 +515,74 @@ pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> 
     if r.active == 0 || groups == 0 {
         return Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     }
+    if !blas.flat_verts.is_empty() {
+        return match r.uniform {
+            Some(k) => closest_flat_table::<true>(blas, &r, k, groups),
+            None => closest_flat_table::<false>(blas, &r, [0, 1, 2], groups),
+        };
+    }
     match r.uniform {
         Some(k) => closest_flat_k::<true>(blas, &r, k, groups),
         None => closest_flat_k::<false>(blas, &r, [0, 1, 2], groups),
     }
+}
+
+/// The sheared vertices of a flat mesh's vertex table that a packet needs, indexed as the
+/// table (`FlatTri::verts`).
+struct ShearedVerts([MaybeUninit<[__m256; 3]>; MAX_FLAT_VERTS]);
+
+impl ShearedVerts {
+    /// Shears the vertices of `blas.flat_verts` set in the groups' masks of `groups`.
+    #[inline(always)]
+    unsafe fn new<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3], groups: u32) -> Self {
+        let mut needed = 0u64;
+        let mut left = groups;
+        while left != 0 {
+            needed |= blas.flat_groups[left.trailing_zeros() as usize].verts;
+            left &= left - 1;
+        }
+        let mut table = ShearedVerts([MaybeUninit::uninit(); MAX_FLAT_VERTS]);
+        while needed != 0 {
+            let j = needed.trailing_zeros() as usize;
+            needed &= needed - 1;
+            table.0[j] = MaybeUninit::new(shear(corner_row::<UNIFORM>(&blas.flat_verts[j], r, k), r));
+        }
+        table
+    }
+
+    /// Vertex `j` (one of those sheared by `new`).
+    #[inline(always)]
+    unsafe fn get(&self, j: u8) -> &[__m256; 3] {
+        // SAFETY: `new` wrote every vertex of the touched groups' triangles.
+        unsafe { self.0.get_unchecked(j as usize).assume_init_ref() }
+    }
+}
+
+/// [`closest_flat`] on a mesh with a vertex table: the needed vertices sheared once
+/// ([`ShearedVerts`]), then the triangles of the touched groups read from the table.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn closest_flat_table<const UNIFORM: bool>(
+    blas: &Blas,
+    r: &Regs<'_>,
+    k: [usize; 3],
+    groups: u32,
+) -> Closest8 {
+    let sv = ShearedVerts::new::<UNIFORM>(blas, r, k, groups);
+    let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
+    let mut best = Best8::new(r.t_max);
+    let mut left = groups;
+    while left != 0 {
+        let g = &blas.flat_groups[left.trailing_zeros() as usize];
+        left &= left - 1;
+        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+        for tri in tris {
+            let [a, b, c] = tri.verts.map(|j| sv.get(j));
+            closest_sheared::<UNIFORM>(&mut best, &mut out, r, tri, a, b, c);
+        }
+    }
+    best.store(&mut out);
+    out
 }
 
 #[target_feature(enable = "avx2,fma")]
@@ -596,10 +681,45 @@ pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) ->
     if r.active == 0 || groups == 0 {
         return 0;
     }
+    if !blas.flat_verts.is_empty() {
+        return (match r.uniform {
+            Some(k) => occluded_flat_table::<true>(blas, &r, k, groups),
+            None => occluded_flat_table::<false>(blas, &r, [0, 1, 2], groups),
+        }) as u8;
+    }
     (match r.uniform {
         Some(k) => occluded_flat_k::<true>(blas, r, k, groups),
         None => occluded_flat_k::<false>(blas, r, [0, 1, 2], groups),
     }) as u8
+}
+
+/// [`occluded_flat`] on a mesh with a vertex table (as [`closest_flat_table`]).
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn occluded_flat_table<const UNIFORM: bool>(
+    blas: &Blas,
+    r: &Regs<'_>,
+    k: [usize; 3],
+    groups: u32,
+) -> u32 {
+    let sv = ShearedVerts::new::<UNIFORM>(blas, r, k, groups);
+    let mut act = r.act;
+    let mut occluded = _mm256_setzero_ps();
+    let mut left = groups;
+    while left != 0 {
+        let g = &blas.flat_groups[left.trailing_zeros() as usize];
+        left &= left - 1;
+        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
+            let [a, b, c] = tri.verts.map(|j| sv.get(j));
+            let hit = any_sheared(r, tri, a, b, c, act);
+            occluded = _mm256_or_ps(occluded, hit);
+            act = _mm256_andnot_ps(hit, act);
+        }
+        if _mm256_movemask_ps(act) == 0 {
+            break;
+        }
+    }
+    _mm256_movemask_ps(occluded) as u32
 }
 
 #[target_feature(enable = "avx2,fma")]

@@ -163,6 +163,8 @@ struct Blas {
     flat_tris: Vec<packet::FlatTri>,
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     flat_groups: Vec<packet::FlatGroup>,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    flat_verts: packet::FlatVerts,
     /// Flat bottom levels only: the groups of `packets` and their boxes, for single rays.
     flat_node: packet::FlatNode,
 }
@@ -233,6 +235,7 @@ impl Blas {
             flat: false,
             flat_tris: Vec::new(),
             flat_groups: Vec::new(),
+            flat_verts: Vec::new(),
             flat_node: packet::FlatNode::default(),
         }
     }
@@ -258,7 +261,7 @@ impl Blas {
             }
             flat_node.count[g] = packets.len() as u32 - flat_node.first[g];
         }
-        let (flat_tris, flat_groups) = packet::flat_layout(ids, &tris, boxes);
+        let (flat_tris, flat_groups, flat_verts) = packet::flat_layout(ids, &tris, boxes);
         Self {
             nodes: Vec::new(),
             nodes8: Vec::new(),
@@ -269,6 +272,7 @@ impl Blas {
             flat: true,
             flat_tris,
             flat_groups,
+            flat_verts,
             flat_node,
         }
     }

@@ -46,6 +46,8 @@ pub(crate) struct FlatTri {
     /// This triangle `(a, b, c)` and the next one of its group are a fan pair `(a, c, d)`
     /// (corners bit for bit equal): the two share the sheared corners `a` and `c`.
     pub pair: bool,
+    /// The corners as indices into the mesh's vertex table ([`FlatVerts`]).
+    pub verts: [u8; 3],
 }
 
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
@@ -67,7 +69,23 @@ pub(crate) struct FlatGroup {
     pub bounds: [f32; 8],
     pub first: u32,
     pub count: u32,
+    /// Bit `j` set when a triangle of the group has vertex `j` of [`FlatVerts`] (0 when
+    /// the mesh has no vertex table).
+    pub verts: u64,
 }
+
+/// Most distinct vertices of a flat mesh's vertex table (a `u64` mask per group).
+pub(crate) const MAX_FLAT_VERTS: usize = 64;
+
+/// The distinct corners (bit for bit) of a flat mesh's triangles, as rows `[x, y, z, x]`:
+/// the 8-ray kernels shear each vertex that a touched group needs once per packet, not
+/// once per triangle corner. Empty when the mesh has more than [`MAX_FLAT_VERTS`].
+pub(crate) type FlatVerts = Vec<VertRow>;
+
+/// One vertex as a 16-byte aligned row `[x, y, z, x]` (one 128-bit broadcast).
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct VertRow(pub [f32; 4]);
 
 /// Most groups of a flat bottom level (the kernels keep the touched ones in a `u32`).
 pub(crate) const MAX_FLAT_GROUPS: usize = 32;
@@ -190,7 +208,7 @@ pub(crate) fn flat_layout(
     ids: &[u32],
     tris: &[crate::triangle::Tri],
     boxes: &[filtrace_core::Aabb],
-) -> (Vec<FlatTri>, Vec<FlatGroup>) {
+) -> (Vec<FlatTri>, Vec<FlatGroup>, FlatVerts) {
     let groups = cluster(boxes, MAX_FLAT_GROUPS, |p, n| FLAT_BOX_COST + p * n as f32);
     let mut flat = Vec::with_capacity(tris.len());
     let mut out = Vec::with_capacity(groups.len());
@@ -200,6 +218,7 @@ pub(crate) fn flat_layout(
             bounds: [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, 0.0, 0.0],
             first: flat.len() as u32,
             count: members.len() as u32,
+            verts: 0,
         });
         let mut i = 0;
         while i < members.len() {
@@ -207,8 +226,12 @@ pub(crate) fn flat_layout(
             let next = members.get(i + 1).map(|&k| &tris[k]);
             let bits = |p: &[f32; 3]| p.map(f32::to_bits);
             let pair = next.is_some_and(|n| bits(&n[0]) == bits(&t[0]) && bits(&n[1]) == bits(&t[2]));
-            let tri =
-                |k: usize| FlatTri { rows: tris[k].map(|[x, y, z]| [x, y, z, x]), id: ids[k], pair: false };
+            let tri = |k: usize| FlatTri {
+                rows: tris[k].map(|[x, y, z]| [x, y, z, x]),
+                id: ids[k],
+                pair: false,
+                verts: [0; 3],
+            };
             flat.push(FlatTri { pair, ..tri(members[i]) });
             if pair {
                 flat.push(tri(members[i + 1]));
@@ -217,7 +240,34 @@ pub(crate) fn flat_layout(
             i += 1;
         }
     }
-    (flat, out)
+    let verts = vertex_table(&mut flat, &mut out);
+    (flat, out, verts)
+}
+
+/// The vertex table of the triangles `flat` (in groups `groups`): sets their corner
+/// indices and the groups' vertex masks; empty (and nothing set) beyond [`MAX_FLAT_VERTS`]
+/// distinct vertices.
+fn vertex_table(flat: &mut [FlatTri], groups: &mut [FlatGroup]) -> FlatVerts {
+    let mut verts: FlatVerts = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    for t in flat.iter() {
+        for row in &t.rows {
+            index.entry(row.map(f32::to_bits)).or_insert_with(|| {
+                verts.push(VertRow(*row));
+                verts.len() - 1
+            });
+        }
+    }
+    if verts.len() > MAX_FLAT_VERTS {
+        return Vec::new();
+    }
+    for g in groups.iter_mut() {
+        for t in &mut flat[g.first as usize..(g.first + g.count) as usize] {
+            t.verts = t.rows.map(|row| index[&row.map(f32::to_bits)] as u8);
+            g.verts |= t.verts.iter().fold(0u64, |m, &j| m | 1 << j);
+        }
+    }
+    verts
 }
 
 /// 8 rays, structure of arrays. Lane i is the ray (`origin[*][i]`, `dir[*][i]`, `t_min[i]`, `t_max[i]`).
@@ -567,7 +617,11 @@ mod flat_tests {
     fn flat_layout_partitions_the_cornell_box() {
         let (ids, tris) = cornell();
         let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t.map(Vec3::from_array))).collect();
-        let (flat, groups) = flat_layout(&ids, &tris, &padded_boxes(&boxes));
+        let (flat, groups, verts) = flat_layout(&ids, &tris, &padded_boxes(&boxes));
+        println!("cornell vertex table: {} vertices", verts.len());
+        for t in &flat {
+            assert_eq!(t.verts.map(|j| verts[j as usize].0), t.rows);
+        }
         assert_eq!(flat.len(), tris.len());
         assert!(groups.len() > 4 && groups.len() <= MAX_FLAT_GROUPS, "{} groups", groups.len());
         let mut seen = vec![0; tris.len()];

@@ -10,12 +10,14 @@
 //! caches), so two builds compare more steadily than by whole-set timings; the figure is
 //! an optimistic bound and is not comparable with `raybench`'s or Embree's numbers.
 //!
-//! `--packets`: the 8-ray packet queries instead, on full packets of eight consecutive
-//! rays (blocks of `N / 8` packets): incoherent closest and shadow rays (`raybench`'s
-//! sets), and the bounce and shadow rays of `bench::surface_rays` (origins on the
+//! `--packets`: the 8-ray packet queries instead (blocks of `N / 8` packets): primary
+//! rays in 4x2 pixel tiles, and full packets of eight consecutive rays: incoherent
+//! closest and shadow rays (`raybench`'s sets), and the bounce and shadow rays of `bench::surface_rays` (origins on the
 //! surfaces, as a path tracer's compacted bounces after the first hit).
 
-use filtrace_accel::bench::{incoherent_rays, packets_of, primary_rays, shadow_rays, surface_rays};
+use filtrace_accel::bench::{
+    incoherent_rays, packets_of, primary_rays, shadow_rays, surface_rays, tile_packets,
+};
 use filtrace_accel::{RayPacket, SceneAccel};
 use filtrace_core::Ray;
 
@@ -90,6 +92,7 @@ fn packet_figures(
     let n = 1 << 20;
     let (bounce, surface_shadow) = surface_rays(scene, accel, n, 7);
     let sets = [
+        ("primary", tile_packets(&primary_rays(scene, 1024, 1024), 1024, 1024), true),
         ("closest", packets_of(&incoherent_rays(scene, n, 7)), true),
         ("shadow", packets_of(&shadow_rays(scene, n, 7)), false),
         ("bounce", packets_of(&bounce), true),

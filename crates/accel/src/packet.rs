@@ -505,7 +505,6 @@ impl SceneAccel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn intersect_packet_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> Option<HitPacket> {
-        let mut out = HitPacket::default();
         let blas = self.object_blas(object);
         // SAFETY: this function runs with AVX2 and FMA.
         let c = unsafe {
@@ -515,19 +514,51 @@ impl SceneAccel {
                 avx2_packet::closest_bvh(blas, rays, active)?
             }
         };
-        // Without a branch per lane (whether a lane hit is a coin flip on some packets);
-        // lanes without a hit keep zeros, as `HitPacket::default`.
-        for i in 0..LANES {
-            let id = c.id.0[i];
-            let hit = id != avx2_packet::NO_HIT;
-            let k = if hit { id as u32 } else { 0 };
-            let (instance, prim) = if object == MERGED { self.merged_refs[k as usize] } else { (object, k) };
-            out.mask |= (hit as u8) << i;
-            let keep = |x: f32| if hit { x } else { 0.0 };
-            (out.t[i], out.u[i], out.v[i]) = (keep(c.t.0[i]), keep(c.u.0[i]), keep(c.v.0[i]));
-            (out.instance[i], out.prim[i]) = (if hit { instance } else { 0 }, if hit { prim } else { 0 });
+        Some(self.hit_packet(object, &c))
+    }
+
+    /// The kernels' closest hits `c` on `object` as a [`HitPacket`], with vector selects
+    /// instead of a branch per lane (whether a lane hit is a coin flip on some packets);
+    /// lanes without a hit keep zeros, as `HitPacket::default`.
+    ///
+    /// Safety: the CPU has AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn hit_packet(&self, object: u32, c: &avx2_packet::Closest8) -> HitPacket {
+        use std::arch::x86_64::*;
+        let mut out = HitPacket::default();
+        let mut refs = [[0u32; LANES]; 2];
+        // SAFETY: unaligned loads and stores of 8 lanes within the arrays named.
+        unsafe {
+            let id = _mm256_loadu_si256(c.id.0.as_ptr() as *const __m256i);
+            let miss = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(avx2_packet::NO_HIT));
+            let keep = |x: __m256i| _mm256_andnot_si256(miss, x);
+            let ps = |x: &[f32; LANES]| _mm256_castps_si256(_mm256_loadu_ps(x.as_ptr()));
+            let store = |dst: *mut __m256i, x: __m256i| _mm256_storeu_si256(dst, keep(x));
+            out.mask = !(_mm256_movemask_ps(_mm256_castsi256_ps(miss)) as u8);
+            store(out.t.as_mut_ptr() as *mut __m256i, ps(&c.t.0));
+            store(out.u.as_mut_ptr() as *mut __m256i, ps(&c.u.0));
+            store(out.v.as_mut_ptr() as *mut __m256i, ps(&c.v.0));
+            if object == MERGED {
+                let mut k = [0u32; LANES];
+                _mm256_storeu_si256(k.as_mut_ptr() as *mut __m256i, keep(id));
+                for i in 0..LANES {
+                    (refs[0][i], refs[1][i]) = self.merged_refs[k[i] as usize];
+                }
+            } else {
+                refs[0] = [object; LANES];
+                _mm256_storeu_si256(refs[1].as_mut_ptr() as *mut __m256i, id);
+            }
+            store(
+                out.instance.as_mut_ptr() as *mut __m256i,
+                _mm256_loadu_si256(refs[0].as_ptr() as *const __m256i),
+            );
+            store(
+                out.prim.as_mut_ptr() as *mut __m256i,
+                _mm256_loadu_si256(refs[1].as_ptr() as *const __m256i),
+            );
         }
-        Some(out)
+        out
     }
 }
 

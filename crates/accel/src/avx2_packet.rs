@@ -35,7 +35,9 @@
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
 use crate::avx2::{any_zero, hit_distance, mixed_signs};
-use crate::packet::{FlatGroup, FlatNode, FlatTri, RayPacket, VertRow, LANES, MAX_FLAT_VERTS};
+use crate::packet::{
+    FlatGroup, FlatNode, FlatTri, RayPacket, VertRow, LANES, MAX_FLAT_VERTS, SHEARED_VERT_BYTES,
+};
 use crate::sah::MAX_DEPTH;
 use crate::tri4::Tri4;
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
@@ -531,6 +533,8 @@ pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> 
 /// table (`FlatTri::verts`).
 struct ShearedVerts([MaybeUninit<[__m256; 3]>; MAX_FLAT_VERTS]);
 
+const _: () = assert!(std::mem::size_of::<[__m256; 3]>() == SHEARED_VERT_BYTES);
+
 impl ShearedVerts {
     /// Shears the vertices of `blas.flat_verts` set in the groups' masks of `groups`.
     #[inline(always)]
@@ -550,11 +554,12 @@ impl ShearedVerts {
         table
     }
 
-    /// Vertex `j` (one of those sheared by `new`).
+    /// The vertex at byte offset `offset` (`FlatTri::corners`; one sheared by `new`).
     #[inline(always)]
-    unsafe fn get(&self, j: u8) -> &[__m256; 3] {
-        // SAFETY: `new` wrote every vertex of the touched groups' triangles.
-        unsafe { self.0.get_unchecked(j as usize).assume_init_ref() }
+    unsafe fn at(&self, offset: u16) -> &[__m256; 3] {
+        // SAFETY: `new` wrote every vertex of the touched groups' triangles; the offsets
+        // are multiples of `SHEARED_VERT_BYTES`, the size of an entry, below the table's.
+        unsafe { &*(self.0.as_ptr().byte_add(offset as usize) as *const [__m256; 3]) }
     }
 }
 
@@ -577,7 +582,7 @@ unsafe fn closest_flat_table<const UNIFORM: bool>(
         left &= left - 1;
         let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
         for tri in tris {
-            let [a, b, c] = tri.verts.map(|j| sv.get(j));
+            let [a, b, c] = tri.corners.map(|o| sv.at(o));
             closest_sheared::<UNIFORM>(&mut best, &mut out, r, tri, a, b, c);
         }
     }
@@ -710,7 +715,7 @@ unsafe fn occluded_flat_table<const UNIFORM: bool>(
         let g = &blas.flat_groups[left.trailing_zeros() as usize];
         left &= left - 1;
         for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
-            let [a, b, c] = tri.verts.map(|j| sv.get(j));
+            let [a, b, c] = tri.corners.map(|o| sv.at(o));
             let hit = any_sheared(r, tri, a, b, c, act);
             occluded = _mm256_or_ps(occluded, hit);
             act = _mm256_andnot_ps(hit, act);

@@ -46,8 +46,10 @@ pub(crate) struct FlatTri {
     /// This triangle `(a, b, c)` and the next one of its group are a fan pair `(a, c, d)`
     /// (corners bit for bit equal): the two share the sheared corners `a` and `c`.
     pub pair: bool,
-    /// The corners as indices into the mesh's vertex table ([`FlatVerts`]).
-    pub verts: [u8; 3],
+    /// The corners as byte offsets `j SHEARED_VERT_BYTES` of their vertices `j` in the
+    /// kernels' table of sheared vertices (indices into [`FlatVerts`], scaled: one load
+    /// each in the triangle loop instead of a multiply).
+    pub corners: [u16; 3],
 }
 
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX2 kernels
@@ -76,6 +78,9 @@ pub(crate) struct FlatGroup {
 
 /// Most distinct vertices of a flat mesh's vertex table (a `u64` mask per group).
 pub(crate) const MAX_FLAT_VERTS: usize = 64;
+
+/// Size of one sheared vertex in the kernels' table: `x, y, z` of eight lanes.
+pub(crate) const SHEARED_VERT_BYTES: usize = 3 * 8 * 4;
 
 /// The distinct corners (bit for bit) of a flat mesh's triangles, as rows `[x, y, z, x]`:
 /// the 8-ray kernels shear each vertex that a touched group needs once per packet, not
@@ -230,7 +235,7 @@ pub(crate) fn flat_layout(
                 rows: tris[k].map(|[x, y, z]| [x, y, z, x]),
                 id: ids[k],
                 pair: false,
-                verts: [0; 3],
+                corners: [0; 3],
             };
             flat.push(FlatTri { pair, ..tri(members[i]) });
             if pair {
@@ -245,7 +250,7 @@ pub(crate) fn flat_layout(
 }
 
 /// The vertex table of the triangles `flat` (in groups `groups`): sets their corner
-/// indices and the groups' vertex masks; empty (and nothing set) beyond [`MAX_FLAT_VERTS`]
+/// offsets and the groups' vertex masks; empty (and nothing set) beyond [`MAX_FLAT_VERTS`]
 /// distinct vertices.
 fn vertex_table(flat: &mut [FlatTri], groups: &mut [FlatGroup]) -> FlatVerts {
     let mut verts: FlatVerts = Vec::new();
@@ -263,8 +268,9 @@ fn vertex_table(flat: &mut [FlatTri], groups: &mut [FlatGroup]) -> FlatVerts {
     }
     for g in groups.iter_mut() {
         for t in &mut flat[g.first as usize..(g.first + g.count) as usize] {
-            t.verts = t.rows.map(|row| index[&row.map(f32::to_bits)] as u8);
-            g.verts |= t.verts.iter().fold(0u64, |m, &j| m | 1 << j);
+            let verts = t.rows.map(|row| index[&row.map(f32::to_bits)]);
+            t.corners = verts.map(|j| (j * SHEARED_VERT_BYTES) as u16);
+            g.verts |= verts.iter().fold(0u64, |m, &j| m | 1 << j);
         }
     }
     verts
@@ -651,7 +657,7 @@ mod flat_tests {
         let (flat, groups, verts) = flat_layout(&ids, &tris, &padded_boxes(&boxes));
         println!("cornell vertex table: {} vertices", verts.len());
         for t in &flat {
-            assert_eq!(t.verts.map(|j| verts[j as usize].0), t.rows);
+            assert_eq!(t.corners.map(|o| verts[o as usize / SHEARED_VERT_BYTES].0), t.rows);
         }
         assert_eq!(flat.len(), tris.len());
         assert!(groups.len() > 4 && groups.len() <= MAX_FLAT_GROUPS, "{} groups", groups.len());

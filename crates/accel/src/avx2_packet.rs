@@ -30,6 +30,11 @@
 //! the smallest primitive id; boxes are culled per lane beyond its own closest hit, so the
 //! visit order (which differs from the single-ray traversal) does not change the result.
 //!
+//! The flat kernels also come compiled for AVX-512VL (`closest_flat_avx512`,
+//! `occluded_flat_avx512`: the same 256-bit operations, so the same results, with 32
+//! vector registers and mask registers; the packet dispatch takes them where the CPU has
+//! AVX-512F and AVX-512VL).
+//!
 //! As in `avx2.rs`, the kernels are `#[target_feature(enable = "avx2,fma")]` functions that
 //! callers reach only when [`crate::Simd::Avx2`] is available; helpers are
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
@@ -511,6 +516,21 @@ pub(crate) unsafe fn flat_node_touch(n: &FlatNode, o: Vec3, d: Vec3, t_min: f32,
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+    closest_flat_in(blas, rays, active)
+}
+
+/// [`closest_flat`] compiled for AVX-512VL (the same 256-bit operations; the compiler
+/// then has 32 vector registers and mask registers).
+///
+/// # Safety
+/// The CPU has AVX2, FMA, AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+pub(crate) unsafe fn closest_flat_avx512(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+    closest_flat_in(blas, rays, active)
+}
+
+#[inline(always)]
+unsafe fn closest_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
     let r = setup(rays, active as u32);
     let lb = LaneBoxes::new(rays);
     let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
@@ -565,8 +585,7 @@ impl ShearedVerts {
 
 /// [`closest_flat`] on a mesh with a vertex table: the needed vertices sheared once
 /// ([`ShearedVerts`]), then the triangles of the touched groups read from the table.
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 unsafe fn closest_flat_table<const UNIFORM: bool>(
     blas: &Blas,
     r: &Regs<'_>,
@@ -590,8 +609,7 @@ unsafe fn closest_flat_table<const UNIFORM: bool>(
     out
 }
 
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 unsafe fn closest_flat_k<const UNIFORM: bool>(
     blas: &Blas,
     r: &Regs<'_>,
@@ -680,6 +698,20 @@ fn closest_scalar(rays: &RayPacket, active: u32, out: &mut Closest8, tri: &Tri, 
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+    occluded_flat_in(blas, rays, active)
+}
+
+/// [`occluded_flat`] compiled for AVX-512VL (as [`closest_flat_avx512`]).
+///
+/// # Safety
+/// The CPU has AVX2, FMA, AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+pub(crate) unsafe fn occluded_flat_avx512(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+    occluded_flat_in(blas, rays, active)
+}
+
+#[inline(always)]
+unsafe fn occluded_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
     let r = setup(rays, active as u32);
     let lb = LaneBoxes::new(rays);
     let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
@@ -699,8 +731,7 @@ pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) ->
 }
 
 /// [`occluded_flat`] on a mesh with a vertex table (as [`closest_flat_table`]).
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 unsafe fn occluded_flat_table<const UNIFORM: bool>(
     blas: &Blas,
     r: &Regs<'_>,
@@ -727,8 +758,7 @@ unsafe fn occluded_flat_table<const UNIFORM: bool>(
     _mm256_movemask_ps(occluded) as u32
 }
 
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usize; 3], groups: u32) -> u32 {
     // Branch-free per triangle (a lane's hit is found at an unpredictable triangle: a
     // branch on it mispredicted about once per lane); lanes that hit leave `act`, and
@@ -1120,5 +1150,60 @@ pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> 
                 break;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{incoherent_rays, packets_of, shadow_rays, surface_rays};
+    use crate::SceneAccel;
+
+    /// The AVX-512VL builds of the flat kernels give the AVX2 builds' answers bit for bit
+    /// (on CPUs with both; the integration tests compare whichever `SceneAccel` runs with
+    /// single rays, so this covers the other one).
+    #[test]
+    fn flat_kernels_agree_across_builds() {
+        if !(is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("avx512f")
+            && is_x86_feature_detected!("avx512vl"))
+        {
+            return;
+        }
+        let cornell = filtrace_scene::builtin("cornell").expect("cornell");
+        let mut cube = filtrace_scene::Scene::default();
+        cube.add_mesh(crate::testmesh::subdivided_cube(6));
+        let big_flat = crate::BuildParams { max_flat_triangles: usize::MAX, ..Default::default() };
+        // The Cornell box (vertex table) and a flat mesh of 432 triangles (no table).
+        for (scene, params, table) in [(&cornell, Default::default(), true), (&cube, big_flat, false)] {
+            flat_kernels_agree(scene, &params, table);
+        }
+    }
+
+    fn flat_kernels_agree(scene: &filtrace_scene::Scene, params: &crate::BuildParams, table: bool) {
+        let accel = SceneAccel::build_with(scene, params);
+        let blas = accel.object_blas(accel.single.expect("one object"));
+        assert!(blas.flat && blas.flat_verts.is_empty() != table);
+        let (bounce, shadow) = surface_rays(scene, &accel, 4096, 3);
+        let mut rays = incoherent_rays(scene, 4096, 5);
+        rays.extend(shadow_rays(scene, 4096, 5));
+        rays.extend(bounce);
+        rays.extend(shadow);
+        let mut hits = 0;
+        for (i, (p, _)) in packets_of(&rays).iter().enumerate() {
+            let active = [0xff, 0x7f, 0b1010_0101, 0b11][i % 4];
+            // SAFETY: the caller detected the features.
+            let (a, b) = unsafe { (closest_flat(blas, p, active), closest_flat_avx512(blas, p, active)) };
+            let bits = |c: &Closest8| {
+                (c.t.0.map(f32::to_bits), c.u.0.map(f32::to_bits), c.v.0.map(f32::to_bits), c.id.0)
+            };
+            assert_eq!(bits(&a), bits(&b), "packet {i}");
+            hits += a.id.0.iter().filter(|&&id| id != NO_HIT).count();
+            // SAFETY: as above.
+            let (a, b) = unsafe { (occluded_flat(blas, p, active), occluded_flat_avx512(blas, p, active)) };
+            assert_eq!(a, b, "packet {i}");
+        }
+        assert!(hits > rays.len() / 4, "{hits} hits of {} rays", rays.len());
     }
 }

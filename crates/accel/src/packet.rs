@@ -389,7 +389,9 @@ impl SceneAccel {
                 let blas = self.object_blas(object);
                 // SAFETY: as in `intersect_packet`.
                 let occluded = unsafe {
-                    if blas.flat {
+                    if blas.flat && avx512() {
+                        Some(avx2_packet::occluded_flat_avx512(blas, &rays, active))
+                    } else if blas.flat {
                         Some(avx2_packet::occluded_flat(blas, &rays, active))
                     } else if active.count_ones() >= MIN_LANES_ANY_BVH {
                         avx2_packet::occluded_bvh(blas, &rays, active)
@@ -495,7 +497,7 @@ impl SceneAccel {
         Some((object, Cow::Owned(local), ok))
     }
 
-    fn object_blas(&self, object: u32) -> &Blas {
+    pub(crate) fn object_blas(&self, object: u32) -> &Blas {
         if object == MERGED {
             &self.merged
         } else {
@@ -514,7 +516,9 @@ impl SceneAccel {
         let blas = self.object_blas(object);
         // SAFETY: this function runs with AVX2 and FMA.
         let c = unsafe {
-            if blas.flat {
+            if blas.flat && avx512() {
+                avx2_packet::closest_flat_avx512(blas, rays, active)
+            } else if blas.flat {
                 avx2_packet::closest_flat(blas, rays, active)
             } else {
                 avx2_packet::closest_bvh(blas, rays, active)?
@@ -566,6 +570,13 @@ impl SceneAccel {
         }
         out
     }
+}
+
+/// The CPU has AVX-512F and AVX-512VL (the flat kernels' builds for 32 registers).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
 }
 
 /// Lanes whose rays are valid ([`Ray::is_valid`]: finite, non-zero direction, no NaN

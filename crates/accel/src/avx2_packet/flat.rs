@@ -367,7 +367,9 @@ unsafe fn occluded_flat_table<const UNIFORM: bool>(
     groups: u32,
 ) -> u32 {
     let sv = ShearedVerts::new::<UNIFORM>(blas, r, k, groups);
-    let mut act = r.act;
+    // Occluded lanes stay in the test (their hits only set bits already set): no
+    // per-triangle update of the active lanes, and the inactive ones are masked by
+    // `t_min_act`. The packet stops once per group when all lanes are occluded.
     let mut occluded = _mm256_setzero_ps();
     let mut left = groups;
     while left != 0 {
@@ -375,15 +377,29 @@ unsafe fn occluded_flat_table<const UNIFORM: bool>(
         left &= left - 1;
         for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
             let [a, b, c] = tri.corners.map(|o| sv.at(o));
-            let hit = any_sheared(r, tri, a, b, c, act);
-            occluded = _mm256_or_ps(occluded, hit);
-            act = _mm256_andnot_ps(hit, act);
+            occluded = _mm256_or_ps(occluded, any_hits(r, tri, a, b, c));
         }
-        if _mm256_movemask_ps(act) == 0 {
+        if _mm256_movemask_ps(occluded) as u32 == r.active {
             break;
         }
     }
     _mm256_movemask_ps(occluded) as u32
+}
+
+/// Lanes of `r.active` that hit the triangle `tri` (sheared corners `a, b, c`) with `t`
+/// in `[t_min, t_max]`, as [`any_sheared`] for all active lanes.
+#[inline(always)]
+unsafe fn any_hits(r: &Regs<'_>, tri: &FlatTri, a: &[__m256; 3], b: &[__m256; 3], c: &[__m256; 3]) -> __m256 {
+    let e = edges(a, b, c);
+    if _mm256_movemask_ps(any_zero(e)) as u32 & r.active != 0 {
+        return lane_mask(any_scalar(r.rays, r.active, &tri.tri()));
+    }
+    // Mixed signs: outside (no lane with a zero edge function gets here; see `test8v`).
+    let reject = mixed_signs(e);
+    let (t, _, _) = hit_distance(e, [a[2], b[2], c[2]]);
+    let in_range =
+        _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min_act), _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max));
+    _mm256_andnot_ps(reject, in_range)
 }
 
 #[inline(always)]

@@ -22,9 +22,9 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
-use crate::integrator::lanes::{LANES, M8};
 use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
-use crate::integrator::{self, PathContext, PathParams, SLOT_PIXEL};
+use crate::integrator::pool::{Pool, POOL};
+use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
 use crate::surface::SceneGeometry;
 use filtrace_accel::SceneAccel;
@@ -392,7 +392,7 @@ impl Renderer {
         self.lockstep_tile::<false>(y0, pixels, first, end, stats)
     }
 
-    /// Groups of [`LANES`] adjacent pixels of each row, one sample index at a time; each
+    /// Pools of [`POOL`] adjacent pixels of each row, one sample index at a time; each
     /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
     /// the same bit for bit.
     #[inline(always)]
@@ -411,27 +411,24 @@ impl Renderer {
             camera: &self.camera,
             queries: self.ray_queries,
         };
+        let mut pool = Pool::default();
+        let mut out = [CameraSample::default(); POOL];
         for (row, row_pixels) in pixels.chunks_mut(width).enumerate() {
             let y = (y0 + row) as u32;
-            for (g, group) in row_pixels.chunks_mut(LANES).enumerate() {
-                let x0 = (g * LANES) as u32;
-                let n = group.len();
-                let lanes = M8::from_array(std::array::from_fn(|i| i < n));
-                let x: [u32; LANES] = std::array::from_fn(|i| x0 + i as u32);
-                let key: [u32; LANES] =
-                    std::array::from_fn(|i| Sampler::pixel_key(x[i], y, self.settings.seed));
-                let mut acc: [FilmPixel; LANES] =
-                    std::array::from_fn(|i| group.get(i).copied().unwrap_or_default());
+            for (c, chunk) in row_pixels.chunks_mut(POOL).enumerate() {
+                let x0 = (c * POOL) as u32;
+                let n = chunk.len();
+                let keys: [u32; POOL] =
+                    std::array::from_fn(|j| Sampler::pixel_key(x0 + j as u32, y, self.settings.seed));
                 for index in first..end {
-                    let s = lockstep::trace_group::<AVX2>(&lc, &x, y, &key, index, lanes, stats);
-                    for i in 0..n {
-                        if let Some(surface) = s[i].surface {
-                            acc[i].surface = surface;
+                    lockstep::trace_pool::<AVX2>(&lc, x0, y, &keys, n, index, &mut pool, stats, &mut out);
+                    for (px, s) in chunk.iter_mut().zip(out.iter()) {
+                        if let Some(surface) = s.surface {
+                            px.surface = surface;
                         }
-                        acc[i].add(&s[i].radiance.to_pixel_sample());
+                        px.add(&s.radiance.to_pixel_sample());
                     }
                 }
-                group.copy_from_slice(&acc[..n]);
             }
         }
     }

@@ -97,6 +97,12 @@ impl<const A: bool> Default for M8<A> {
         M8::none()
     }
 }
+impl<const A: bool> Default for U8<A> {
+    #[inline(always)]
+    fn default() -> Self {
+        U8::splat(0)
+    }
+}
 impl<const A: bool> PartialEq for F8<A> {
     fn eq(&self, o: &Self) -> bool {
         self.to_array() == o.to_array()
@@ -383,6 +389,90 @@ pub fn from_bits<const A: bool>(b: u8) -> M8<A> {
         },
         M8(raw_from_i(per_lane(|i| -(((b >> i) & 1) as i32))))
     )
+}
+
+/// Row `m`: the indices of the lanes set in `m`, in order, then the others (stream
+/// compaction by one `vpermps`, [`compress_store`]).
+static COMPRESS: [[u32; LANES]; 256] = compress_table();
+
+const fn compress_table() -> [[u32; LANES]; 256] {
+    let mut t = [[0u32; LANES]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let (mut j, mut i) = (0, 0);
+        while i < LANES {
+            if (m >> i) & 1 == 1 {
+                t[m][j] = i as u32;
+                j += 1;
+            }
+            i += 1;
+        }
+        i = 0;
+        while i < LANES {
+            if (m >> i) & 1 == 0 {
+                t[m][j] = i as u32;
+                j += 1;
+            }
+            i += 1;
+        }
+        m += 1;
+    }
+    t
+}
+
+/// Stores the lanes of `v` set in `keep` at `dst[at..]`, packed in lane order; the words
+/// up to `dst[at + 8]` after them are overwritten with the other lanes. `dst` may be the
+/// slice `v` was loaded from (`at` at most the lane's old index: the stream compaction of
+/// [`super::pool`]).
+#[inline(always)]
+pub fn compress_store<const A: bool>(v: F8<A>, keep: u8, dst: &mut [f32], at: usize) {
+    let dst: &mut [f32; LANES] = (&mut dst[at..at + LANES]).try_into().expect("eight words");
+    avx_or!(
+        A,
+        {
+            let idx = _mm256_loadu_si256(COMPRESS[keep as usize].as_ptr() as *const __m256i);
+            _mm256_storeu_ps(dst.as_mut_ptr(), _mm256_permutevar8x32_ps(v.0, idx))
+        },
+        {
+            let a = v.to_array();
+            *dst = per_lane(|j| a[COMPRESS[keep as usize][j] as usize]);
+        }
+    )
+}
+
+/// [`compress_store`] of `u32` lanes.
+#[inline(always)]
+pub fn compress_store_u32<const A: bool>(v: U8<A>, keep: u8, dst: &mut [u32], at: usize) {
+    let dst: &mut [u32; LANES] = (&mut dst[at..at + LANES]).try_into().expect("eight words");
+    avx_or!(
+        A,
+        {
+            let idx = _mm256_loadu_si256(COMPRESS[keep as usize].as_ptr() as *const __m256i);
+            _mm256_storeu_ps(dst.as_mut_ptr() as *mut f32, _mm256_permutevar8x32_ps(v.0, idx))
+        },
+        {
+            let a = v.to_array();
+            *dst = per_lane(|j| a[COMPRESS[keep as usize][j] as usize]);
+        }
+    )
+}
+
+/// `src[at..at + 8]` as lanes.
+#[inline(always)]
+pub fn load8<const A: bool>(src: &[f32], at: usize) -> F8<A> {
+    F8::from_array(src[at..at + LANES].try_into().expect("eight words"))
+}
+
+/// `src[at..at + 8]` as `u32` lanes.
+#[inline(always)]
+pub fn load8_u32<const A: bool>(src: &[u32], at: usize) -> U8<A> {
+    U8::from_array(src[at..at + LANES].try_into().expect("eight words"))
+}
+
+/// The mask as `u32` words (`u32::MAX` / 0; [`mask_of`] is the inverse).
+#[inline(always)]
+pub fn mask_words<const A: bool>(m: M8<A>) -> U8<A> {
+    U8(m.0)
 }
 
 impl<const A: bool> Add for F8<A> {
@@ -832,6 +922,32 @@ impl<const A: bool> U8<A> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn compress_store_packs_the_kept_lanes_in_order() {
+        let v: [f32; LANES] = std::array::from_fn(|i| i as f32 + 0.5);
+        let w: [u32; LANES] = std::array::from_fn(|i| 100 + i as u32);
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        for keep in 0..=255u8 {
+            let kept: Vec<usize> = (0..LANES).filter(|&i| (keep >> i) & 1 == 1).collect();
+            let mut dst = [-1.0f32; 11];
+            compress_store(F8::<false>::from_array(v), keep, &mut dst, 3);
+            let mut dst_u = [0u32; 9];
+            compress_store_u32(U8::<false>::from_array(w), keep, &mut dst_u, 1);
+            for (j, &i) in kept.iter().enumerate() {
+                assert_eq!((dst[3 + j], dst_u[1 + j]), (v[i], w[i]), "mask {keep:#010b}");
+            }
+            assert_eq!(dst[..3], [-1.0; 3]);
+            if avx2 {
+                let mut a = [-1.0f32; 11];
+                compress_store(F8::<true>::from_array(v), keep, &mut a, 3);
+                assert_eq!(a, dst);
+            }
+        }
+    }
 
     #[test]
     fn vector_helpers_match_glam() {

@@ -19,6 +19,7 @@ pub mod bsdf_only;
 pub mod lanes;
 pub mod lockstep;
 pub mod path;
+pub mod pool;
 pub mod sampler8;
 
 use crate::bsdf::SurfaceBsdf;

@@ -68,7 +68,13 @@ fn sobol_dim1_reversed8<const A: bool>(idx: U8<A>) -> U8<A> {
 impl<const AVX2: bool> Sampler8<AVX2> {
     #[inline(always)]
     pub fn new(key: [u32; LANES], index: u32) -> Self {
-        Sampler8 { key: U8::from_array(key), index_rev: index.reverse_bits() }
+        Self::from_keys(U8::from_array(key), index)
+    }
+
+    /// The samplers of the pixel keys `key` at sample `index`.
+    #[inline(always)]
+    pub fn from_keys(key: U8<AVX2>, index: u32) -> Self {
+        Sampler8 { key, index_rev: index.reverse_bits() }
     }
 
     /// Per-lane seed of `slot` and the reversed shuffled index.

@@ -57,6 +57,9 @@ pub struct SceneGeometry {
     /// For scenes with at most eight materials: their flags and Lambert reflectances as
     /// eight-entry tables.
     small_materials: Option<Box<SmallMaterials>>,
+    /// For scenes of at most eight instances, none with vertex normals or uvs: each
+    /// instance's first row in `tris` (lane `i` = instance `i`).
+    plain_first_tris: Option<[u32; 8]>,
 }
 
 /// [`SmallMaterials::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
@@ -130,6 +133,7 @@ impl SceneGeometry {
             tris: Vec::with_capacity(scene.triangle_count()),
             constant_bsdfs,
             small_materials: None,
+            plain_first_tris: None,
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
             let inv = inst.transform.matrix3.inverse();
@@ -151,6 +155,13 @@ impl SceneGeometry {
                 });
             }
         }
+        if g.instances.len() <= 8 && g.instances.iter().all(|i| !i.has_normals && !i.has_uvs) {
+            let mut first = [0u32; 8];
+            for (f, inst) in first.iter_mut().zip(&g.instances) {
+                *f = inst.first_tri;
+            }
+            g.plain_first_tris = Some(first);
+        }
         let n = scene.materials.len();
         if n <= 8 && g.tris.iter().all(|t| (t.material as usize) < n) {
             let mut t = SmallMaterials::default();
@@ -166,6 +177,14 @@ impl SceneGeometry {
             g.small_materials = Some(Box::new(t));
         }
         g
+    }
+
+    /// For scenes of at most eight instances without vertex normals and uvs: the first
+    /// row of each instance's triangles in [`Self::tri_words`] (triangle `prim` of
+    /// instance `i` is row `first[i] + prim`, as in [`Self::plain_row`]).
+    #[inline]
+    pub(crate) fn plain_first_tris(&self) -> Option<&[u32; 8]> {
+        self.plain_first_tris.as_ref()
     }
 
     /// [`SmallMaterials`] of scenes with at most eight materials.

@@ -233,6 +233,11 @@ impl<const A: bool> F8<A> {
     pub fn to_array(self) -> [f32; LANES] {
         raw_to_f(self.0)
     }
+    /// The lanes' bits as `u32` lanes (`f32::to_bits`).
+    #[inline(always)]
+    pub fn to_bits(self) -> U8<A> {
+        U8(self.0)
+    }
     /// Lane `i`.
     #[inline(always)]
     pub fn lane(self, i: usize) -> f32 {

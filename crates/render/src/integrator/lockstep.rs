@@ -37,8 +37,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
 use super::lanes::{
-    alias_pick8, bits, columns, from_bits, load8_u32, lookup8, lookup8_u32, mask_of, per_lane, select, F8,
-    LANES, M8, U8, V8,
+    alias_pick8, bits, columns, from_bits, load8_u32, lookup8, lookup8_u32, mask_of, mask_words, per_lane,
+    select, F8, LANES, M8, U8, V8,
 };
 use super::path::visible_surface;
 use super::pool::{PathLanes, Pool, POOL};
@@ -112,7 +112,8 @@ struct Surf8<const A: bool> {
     n_winding: V8<A>,
     front_face: M8<A>,
     wo: V8<A>,
-    uv: [Vec2; LANES],
+    /// `u` and `v` rows.
+    uv: [[f32; LANES]; 2],
     material: [u32; LANES],
     instance: [u32; LANES],
     prim: [u32; LANES],
@@ -131,7 +132,7 @@ impl<const A: bool> Surf8<A> {
             n_winding: self.n_winding.lane(i),
             front_face: self.front_face.get(i),
             wo: self.wo.lane(i),
-            uv: self.uv[i],
+            uv: Vec2::new(self.uv[0][i], self.uv[1][i]),
             material: self.material[i],
             instance: self.instance[i],
             prim: self.prim[i],
@@ -148,7 +149,7 @@ impl<const A: bool> Surf8<A> {
         self.n_winding.set_lane(i, si.n_winding);
         self.front_face.set(i, si.front_face);
         self.wo.set_lane(i, si.wo);
-        self.uv[i] = si.uv;
+        (self.uv[0][i], self.uv[1][i]) = (si.uv.x, si.uv.y);
         self.material[i] = si.material;
         self.instance[i] = si.instance;
         self.prim[i] = si.prim;
@@ -194,37 +195,49 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
     let mut plain = 0u8;
     let mut scalar_ok = 0u8;
     let mut scalar = [None; LANES];
-    let mut b = hits.mask as u32;
-    while b != 0 {
-        let i = b.trailing_zeros() as usize;
-        b &= b - 1;
-        match ctx.geometry.plain_row(hits.instance[i], hits.prim[i]) {
-            Some((row, material)) => {
-                plain |= 1 << i;
-                start[i] = row * TRI_FLOATS;
-                s.material[i] = material;
-            }
-            None => {
-                let h = Hit {
-                    t: hits.t[i],
-                    u: hits.u[i],
-                    v: hits.v[i],
-                    instance: hits.instance[i],
-                    prim: hits.prim[i],
-                };
-                let ray = Ray::new(Vec3::ZERO, dir.lane(i));
-                scalar[i] = SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h);
-                if scalar[i].is_some() {
-                    scalar_ok |= 1 << i;
+    s.instance = hits.instance;
+    s.prim = hits.prim;
+    // The uvs of a mesh without vertex uvs are the barycentrics (the scalar lanes'
+    // records overwrite theirs below).
+    s.uv = [hits.u, hits.v];
+    if let Some(first_tri) = ctx.geometry.plain_first_tris() {
+        // Every instance plain: the rows by one table lookup, the materials from the rows.
+        plain = hits.mask;
+        let rows = lookup8_u32(first_tri, U8::<A>::from_array(hits.instance))
+            .wrapping_add(U8::from_array(hits.prim))
+            .and(mask_words(from_bits::<A>(plain)))
+            .to_array();
+        start = per_lane(|i| rows[i] as usize * TRI_FLOATS);
+    } else {
+        let mut b = hits.mask as u32;
+        while b != 0 {
+            let i = b.trailing_zeros() as usize;
+            b &= b - 1;
+            match ctx.geometry.plain_row(hits.instance[i], hits.prim[i]) {
+                Some((row, _)) => {
+                    plain |= 1 << i;
+                    start[i] = row * TRI_FLOATS;
+                }
+                None => {
+                    let h = Hit {
+                        t: hits.t[i],
+                        u: hits.u[i],
+                        v: hits.v[i],
+                        instance: hits.instance[i],
+                        prim: hits.prim[i],
+                    };
+                    let ray = Ray::new(Vec3::ZERO, dir.lane(i));
+                    scalar[i] = SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h);
+                    if scalar[i].is_some() {
+                        scalar_ok |= 1 << i;
+                    }
                 }
             }
         }
-        s.instance[i] = hits.instance[i];
-        s.prim[i] = hits.prim[i];
     }
     // The records as lanes: words 0..8 and 6..14 of each row, transposed (a row lies in
     // the table: `plain_row` indexed the record).
-    let (p0, p1, p2, n, scale) = if plain != 0 {
+    let (p0, p1, p2, n, scale, material) = if plain != 0 {
         let words = ctx.geometry.tri_words();
         let a = columns::<A>(words, &start).expect("triangle rows in the table");
         let b = columns::<A>(words, &start.map(|s| s + 6)).expect("triangle rows in the table");
@@ -234,10 +247,13 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
             V8::new(a[6], a[7], b[2]),
             V8::new(b[3], b[4], b[5]),
             b[6],
+            b[7].to_bits(),
         )
     } else {
-        (V8::default(), V8::default(), V8::default(), V8::default(), F8::default())
+        (V8::default(), V8::default(), V8::default(), V8::default(), F8::default(), U8::default())
     };
+    // Word 13 of a row: the material's bits (the scalar lanes' records overwrite theirs).
+    s.material = material.to_array();
     // The lane version of `from_hit` (mesh without normals and uvs: n_s = n_g = winding).
     let (b1, b2) = (F8::from_array(hits.u), F8::from_array(hits.v));
     let b0 = F8::splat(1.0) - b1 - b2;
@@ -253,12 +269,6 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
     s.n_g = V8::select(flip, -n, n);
     s.n_s = s.n_g;
     s.t = F8::from_array(hits.t) * dir_len;
-    let mut b = plain as u32;
-    while b != 0 {
-        let i = b.trailing_zeros() as usize;
-        b &= b - 1;
-        s.uv[i] = Vec2::new(hits.u[i], hits.v[i]);
-    }
     let ok_plain = from_bits::<A>(plain) & !n.is_zero();
     let mut b = scalar_ok as u32;
     while b != 0 {
@@ -652,7 +662,7 @@ fn shade<const AVX2: bool>(
             (rho[0][i], rho[1][i], rho[2][i]) = (r.x, r.y, r.z);
             continue;
         }
-        let b = ctx.geometry.bsdf(ctx.scene, si.material[i], si.uv[i]);
+        let b = ctx.geometry.bsdf(ctx.scene, si.material[i], Vec2::new(si.uv[0][i], si.uv[1][i]));
         match &b {
             SurfaceBsdf::Diffuse(d) => {
                 diffuse |= 1 << i;

@@ -192,7 +192,7 @@ unsafe fn closest_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8
 }
 
 /// The sheared vertices of a flat mesh's vertex table that a packet needs, indexed as the
-/// table (`FlatTri::verts`).
+/// table (`FlatTri::corners` are byte offsets into it).
 struct ShearedVerts([MaybeUninit<[__m256; 3]>; MAX_FLAT_VERTS]);
 
 const _: () = assert!(std::mem::size_of::<[__m256; 3]>() == SHEARED_VERT_BYTES);

@@ -37,7 +37,14 @@ pub struct PixelSample {
 impl PixelSample {
     #[inline]
     pub fn is_finite(&self) -> bool {
-        self.color.is_finite() && self.direct.is_finite() && self.indirect.is_finite()
+        // One branch-free pass over the nine values (a `&&` chain of per-component
+        // `is_finite` was ~25 instructions and nine branches per sample in the render loop).
+        let v = [self.color, self.direct, self.indirect];
+        let exponent_all_ones = v
+            .iter()
+            .flat_map(|c| c.to_array())
+            .fold(false, |bad, x| bad | ((x.to_bits() & 0x7f80_0000) == 0x7f80_0000));
+        !exponent_all_ones
     }
 }
 
@@ -55,7 +62,7 @@ pub struct FilmPixel {
 
 impl FilmPixel {
     /// Adds a sample, or drops it when non-finite (see the module docs).
-    #[inline]
+    #[inline(always)]
     pub fn add(&mut self, s: &PixelSample) {
         if !s.is_finite() {
             self.dropped += 1;
@@ -240,5 +247,22 @@ mod tests {
         assert_eq!(a.color.count_non_finite(), 0);
         assert_eq!(a.color.rgb(0, 0), Rgb::ONE);
         assert_eq!(a.color.rgb(1, 0), Rgb::ZERO);
+    }
+
+    /// Every one of the nine values, as NaN, +-inf or the largest finite value.
+    #[test]
+    fn is_finite_checks_every_component() {
+        let base = PixelSample { color: Rgb::ONE, direct: Rgb::splat(0.5), indirect: Rgb::splat(-0.0) };
+        assert!(base.is_finite());
+        for k in 0..9 {
+            for (x, finite) in
+                [(f32::NAN, false), (f32::INFINITY, false), (f32::NEG_INFINITY, false), (f32::MAX, true)]
+            {
+                let mut v = [base.color, base.direct, base.indirect].map(|c| c.to_array());
+                v[k / 3][k % 3] = x;
+                let s = PixelSample { color: v[0].into(), direct: v[1].into(), indirect: v[2].into() };
+                assert_eq!(s.is_finite(), finite, "component {k}, value {x}");
+            }
+        }
     }
 }

@@ -467,16 +467,15 @@ fn camera_group<const AVX2: bool>(
     let mut si = Surf8::<AVX2>::default();
     let hit = from_hits(ctx, &dir, &hits, &mut si);
     let want_surface = index == 0;
-    for i in lanes_of(lanes) {
-        let o = &mut out[first + i];
-        if hit.get(i) {
-            if want_surface {
-                o.surface = Some(visible_surface(ctx, &si.lane(i)));
-            }
-        } else {
-            o.radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
-            o.surface = want_surface.then(VisibleSurface::default);
+    if want_surface {
+        for i in lanes_of(lanes & hit) {
+            out[first + i].surface = Some(visible_surface(ctx, &si.lane(i)));
         }
+    }
+    for i in lanes_of(lanes & !hit) {
+        let o = &mut out[first + i];
+        o.radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
+        o.surface = want_surface.then(VisibleSurface::default);
     }
     let paths = PathLanes {
         beta: V8::splat(Rgb::ONE),
@@ -530,9 +529,15 @@ fn bounce_batch<const AVX2: bool>(
         add_environment(ctx, cont & !hit, &wi, &mut p, vertex + 1);
         alive = hit;
     }
-    for i in lanes_of(stored & !alive) {
-        out[p.pixel.to_array()[i] as usize].radiance =
-            Split { direct: p.l_direct.lane(i), indirect: p.l_indirect.lane(i) };
+    // The radiance of every path of the batch (those that go on overwrite theirs at a later
+    // bounce): a loop over the batch's lanes, not over the ended ones, whose count is random
+    // (its exit branch mispredicted).
+    let (ld, li, pixel) = (p.l_direct.to_arrays(), p.l_indirect.to_arrays(), p.pixel.to_array());
+    for i in 0..hits.mask.count_ones() as usize {
+        out[pixel[i] as usize].radiance = Split {
+            direct: Rgb::new(ld[0][i], ld[1][i], ld[2][i]),
+            indirect: Rgb::new(li[0][i], li[1][i], li[2][i]),
+        };
     }
     pool.store(kept, bits(alive), &p, &wi, &next);
     kept + alive.count() as usize

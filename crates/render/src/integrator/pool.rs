@@ -129,7 +129,7 @@ impl Pool {
     }
 
     /// Batch `b`: paths `8b..8b + 8`, their ray directions and hits (`mask`: the lanes
-    /// holding a path).
+    /// holding a path, always the first ones).
     #[inline(always)]
     pub fn load<const A: bool>(&self, b: usize) -> (PathLanes<A>, V8<A>, HitPacket) {
         let at = b * LANES;

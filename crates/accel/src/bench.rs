@@ -271,13 +271,16 @@ pub fn shadow_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
 /// the surfaces of `scene` (`accel` built from it), each origin moved off its surface by
 /// `1.6e-6` of the scene's extent along the geometric normal (the renderer's offset), as
 /// `(bounce, shadow)`: a bounce ray into the hemisphere of that side (`t` in `[0, inf)`),
-/// and a shadow segment to a point of the quad of [`shadow_rays`] (`t` in
-/// `[0, 1 - 10^-4]`). Consecutive rays come from unrelated points (incoherent packets).
+/// and a shadow segment to a random point of a random emissive triangle (the quad of
+/// [`shadow_rays`] in scenes without one), ending `10^-4` of its length short of it as the
+/// renderer's (`t` in `[0, 1 - 10^-4]`). Consecutive rays come from unrelated points
+/// (incoherent packets).
 pub fn surface_rays(scene: &Scene, accel: &SceneAccel, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
     let b = triangle_bounds(scene);
     let e = b.extent();
     let offset = 1.6e-6 * e.max_element();
     let light = Vec3::new(b.center().x, b.max.y - 0.01 * e.y, b.center().z);
+    let lights = emissive_triangles(scene);
     let mut rng = SplitMix64(seed ^ 0xB0B0);
     let (mut bounce, mut shadow) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for ray in incoherent_rays(scene, 2 * n, seed) {
@@ -298,10 +301,32 @@ pub fn surface_rays(scene: &Scene, accel: &SceneAccel, n: usize, seed: u64) -> (
             d = -d;
         }
         bounce.push(Ray::new(o, d));
-        let q = light + Vec3::new(rng.next_f32() - 0.5, 0.0, rng.next_f32() - 0.5) * 0.2 * e;
+        let q = if lights.is_empty() {
+            light + Vec3::new(rng.next_f32() - 0.5, 0.0, rng.next_f32() - 0.5) * 0.2 * e
+        } else {
+            let [a, b, c] = lights[(rng.next_f32() * lights.len() as f32) as usize % lights.len()];
+            let (s, t) = (rng.next_f32(), rng.next_f32());
+            let (s, t) = if s + t > 1.0 { (1.0 - s, 1.0 - t) } else { (s, t) };
+            a + s * (b - a) + t * (c - a)
+        };
         shadow.push(Ray::segment(o, q - o, 0.0, 1.0 - 1e-4));
     }
     (bounce, shadow)
+}
+
+/// The world-space corners of the triangles with emissive materials.
+fn emissive_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
+    let mut out = Vec::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let mesh = &scene.meshes[inst.mesh as usize];
+        for p in 0..mesh.triangle_count() {
+            let m = scene.material_of(i as u32, p as u32) as usize;
+            if scene.materials.get(m).is_some_and(|m| m.is_emissive()) {
+                out.push(mesh.triangle(p).map(|v| inst.transform.transform_point3(v)));
+            }
+        }
+    }
+    out
 }
 
 /// Groups `rays` into packets of eight consecutive rays (the last one partial).

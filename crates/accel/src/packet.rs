@@ -11,7 +11,6 @@
 use crate::{avx2_packet, Simd};
 use crate::{object_ray, Blas, Hit, SceneAccel, MERGED};
 use filtrace_core::{Ray, Vec3};
-use std::borrow::Cow;
 
 /// Number of rays in a packet.
 pub const LANES: usize = 8;
@@ -367,12 +366,24 @@ impl SceneAccel {
     pub fn intersect_packet(&self, rays: &RayPacket, active: u8) -> HitPacket {
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_CLOSEST {
-            if let Some((object, rays, active)) = self.single_object(rays, active) {
-                let min = if self.object_blas(object).flat { 0 } else { MIN_LANES_CLOSEST_BVH };
+            if let Some((object, transformed)) = self.single_object() {
+                let local;
+                let (rays, active) = if transformed {
+                    local = self.object_space_rays(object, rays, active);
+                    (&local.0, local.1)
+                } else {
+                    (rays, active)
+                };
                 // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
-                if active.count_ones() >= min {
-                    if let Some(hits) = unsafe { self.intersect_packet_avx2(object, &rays, active) } {
-                        return hits;
+                unsafe {
+                    if self.object_blas(object).flat {
+                        // Returned as it is (an `Option` around it was a 164-byte copy).
+                        return self.intersect_flat_avx2(object, rays, active);
+                    }
+                    if active.count_ones() >= MIN_LANES_CLOSEST_BVH {
+                        if let Some(hits) = self.intersect_bvh_avx2(object, rays, active) {
+                            return hits;
+                        }
                     }
                 }
             }
@@ -385,16 +396,23 @@ impl SceneAccel {
     pub fn occluded_packet(&self, rays: &RayPacket, active: u8) -> u8 {
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_ANY {
-            if let Some((object, rays, active)) = self.single_object(rays, active) {
+            if let Some((object, transformed)) = self.single_object() {
+                let local;
+                let (rays, active) = if transformed {
+                    local = self.object_space_rays(object, rays, active);
+                    (&local.0, local.1)
+                } else {
+                    (rays, active)
+                };
                 let blas = self.object_blas(object);
                 // SAFETY: as in `intersect_packet`.
                 let occluded = unsafe {
                     if blas.flat && avx512() {
-                        Some(avx2_packet::occluded_flat_avx512(blas, &rays, active))
+                        Some(avx2_packet::occluded_flat_avx512(blas, rays, active))
                     } else if blas.flat {
-                        Some(avx2_packet::occluded_flat(blas, &rays, active))
+                        Some(avx2_packet::occluded_flat(blas, rays, active))
                     } else if active.count_ones() >= MIN_LANES_ANY_BVH {
-                        avx2_packet::occluded_bvh(blas, &rays, active)
+                        avx2_packet::occluded_bvh(blas, rays, active)
                     } else {
                         None
                     }
@@ -474,15 +492,19 @@ impl SceneAccel {
         out
     }
 
-    /// When the scene is a single object (no top level): that object, the rays in its
-    /// object space, and the lanes to trace there (the kernels drop invalid rays; for a
-    /// transformed instance, lanes whose rays are invalid or cannot be moved into object
-    /// space are dropped here, as in the single-ray query).
-    fn single_object<'a>(&self, rays: &'a RayPacket, active: u8) -> Option<(u32, Cow<'a, RayPacket>, u8)> {
+    /// When the scene is a single object (no top level): that object, and whether rays
+    /// must be moved into its object space ([`Self::object_space_rays`]; not for the merged
+    /// meshes and untransformed instances, whose rays are used as they are, without a copy).
+    #[inline]
+    fn single_object(&self) -> Option<(u32, bool)> {
         let object = self.single?;
-        if object == MERGED || self.instances[object as usize].identity {
-            return Some((object, Cow::Borrowed(rays), active));
-        }
+        Some((object, object != MERGED && !self.instances[object as usize].identity))
+    }
+
+    /// The rays of instance `object`'s object space, and the lanes to trace there: lanes
+    /// whose rays are invalid or cannot be moved into object space are dropped, as in the
+    /// single-ray query (the kernels drop invalid rays themselves).
+    fn object_space_rays(&self, object: u32, rays: &RayPacket, active: u8) -> (RayPacket, u8) {
         let rec = &self.instances[object as usize];
         let active = active & valid_lanes(rays);
         let mut local = *rays;
@@ -494,7 +516,7 @@ impl SceneAccel {
                 ok |= 1 << i;
             }
         }
-        Some((object, Cow::Owned(local), ok))
+        (local, ok)
     }
 
     pub(crate) fn object_blas(&self, object: u32) -> &Blas {
@@ -505,25 +527,34 @@ impl SceneAccel {
         }
     }
 
-    /// The closest-hit packet query on a single object with AVX2: the flat kernel, or
-    /// the packet traversal of a BVH (`None` for packets it does not take: lanes with
-    /// different direction signs or permutations).
+    /// The closest-hit packet query on a single flat object with AVX2 (the AVX-512VL
+    /// build where the CPU has it).
     ///
     /// Safety: the CPU has AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn intersect_packet_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> Option<HitPacket> {
+    fn intersect_flat_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> HitPacket {
         let blas = self.object_blas(object);
         // SAFETY: this function runs with AVX2 and FMA.
         let c = unsafe {
-            if blas.flat && avx512() {
+            if avx512() {
                 avx2_packet::closest_flat_avx512(blas, rays, active)
-            } else if blas.flat {
-                avx2_packet::closest_flat(blas, rays, active)
             } else {
-                avx2_packet::closest_bvh(blas, rays, active)?
+                avx2_packet::closest_flat(blas, rays, active)
             }
         };
+        self.hit_packet(object, &c)
+    }
+
+    /// The closest-hit packet traversal of a single object's BVH with AVX2 (`None` for
+    /// packets it does not take: lanes with different direction signs or permutations).
+    ///
+    /// Safety: the CPU has AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn intersect_bvh_avx2(&self, object: u32, rays: &RayPacket, active: u8) -> Option<HitPacket> {
+        // SAFETY: this function runs with AVX2 and FMA.
+        let c = unsafe { avx2_packet::closest_bvh(self.object_blas(object), rays, active)? };
         Some(self.hit_packet(object, &c))
     }
 

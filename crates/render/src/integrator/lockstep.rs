@@ -411,15 +411,18 @@ pub fn trace_pool<const AVX2: bool>(
     debug_assert!(n <= POOL);
     *out = [CameraSample::default(); POOL];
     pool.clear();
+    // The hit records of the batch at hand (`from_hits` writes every field; one record
+    // per pool, not a 672-byte `memset` per batch).
+    let mut si = Surf8::<AVX2>::default();
     for first in (0..n).step_by(LANES) {
         let lanes = from_bits::<AVX2>(((1u32 << (n - first).min(LANES)) - 1) as u8);
-        camera_group(lc, x0, y, keys, first, lanes, index, pool, stats, out);
+        camera_group(lc, x0, y, keys, first, lanes, index, pool, &mut si, stats, out);
     }
     let mut vertex = 0u32;
     while !pool.is_empty() {
         let mut kept = 0;
         for b in 0..pool.batches() {
-            kept = bounce_batch::<AVX2>(lc, pool, b, kept, vertex, index, stats, out);
+            kept = bounce_batch::<AVX2>(lc, pool, b, kept, vertex, index, &mut si, stats, out);
         }
         pool.truncate(kept);
         vertex += 1;
@@ -439,6 +442,7 @@ fn camera_group<const AVX2: bool>(
     lanes: M8<AVX2>,
     index: u32,
     pool: &mut Pool,
+    si: &mut Surf8<AVX2>,
     stats: &mut LaneStats,
     out: &mut [CameraSample; POOL],
 ) {
@@ -464,8 +468,7 @@ fn camera_group<const AVX2: bool>(
         t_max: [f32::INFINITY; LANES],
     };
     let hits = lc.intersect(&rays, lanes);
-    let mut si = Surf8::<AVX2>::default();
-    let hit = from_hits(ctx, &dir, &hits, &mut si);
+    let hit = from_hits(ctx, &dir, &hits, si);
     let want_surface = index == 0;
     if want_surface {
         for i in lanes_of(lanes & hit) {
@@ -499,21 +502,21 @@ fn bounce_batch<const AVX2: bool>(
     kept: usize,
     vertex: u32,
     index: u32,
+    si: &mut Surf8<AVX2>,
     stats: &mut LaneStats,
     out: &mut [CameraSample; POOL],
 ) -> usize {
     let ctx = &lc.ctx;
     let (mut p, dir, hits) = pool.load::<AVX2>(b);
     let stored = from_bits::<AVX2>(hits.mask);
-    let mut si = Surf8::<AVX2>::default();
-    let found = from_hits(ctx, &dir, &hits, &mut si);
+    let found = from_hits(ctx, &dir, &hits, si);
     // A hit on a degenerate triangle counts as a miss (as in `PathContext::intersect`).
     add_environment(ctx, stored & !found, &dir, &mut p, vertex);
     let act = stored & found;
     stats.alive[(vertex as usize).min(STATS_VERTICES - 1)] += act.count() as u64;
     stats.bounces += 1;
 
-    let (cont, org, wi) = shade(lc, &mut p, &si, act, vertex, index);
+    let (cont, org, wi) = shade(lc, &mut p, si, act, vertex, index);
     let mut alive = M8::none();
     let mut next = HitPacket::default();
     if cont.any() {

@@ -367,13 +367,8 @@ impl SceneAccel {
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_CLOSEST {
             if let Some((object, transformed)) = self.single_object() {
-                let local;
-                let (rays, active) = if transformed {
-                    local = self.object_space_rays(object, rays, active);
-                    (&local.0, local.1)
-                } else {
-                    (rays, active)
-                };
+                let mut local = None;
+                let (rays, active) = self.object_rays(object, transformed, rays, active, &mut local);
                 // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
                 unsafe {
                     if self.object_blas(object).flat {
@@ -397,13 +392,8 @@ impl SceneAccel {
         #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_ANY {
             if let Some((object, transformed)) = self.single_object() {
-                let local;
-                let (rays, active) = if transformed {
-                    local = self.object_space_rays(object, rays, active);
-                    (&local.0, local.1)
-                } else {
-                    (rays, active)
-                };
+                let mut local = None;
+                let (rays, active) = self.object_rays(object, transformed, rays, active, &mut local);
                 let blas = self.object_blas(object);
                 // SAFETY: as in `intersect_packet`.
                 let occluded = unsafe {
@@ -499,6 +489,24 @@ impl SceneAccel {
     fn single_object(&self) -> Option<(u32, bool)> {
         let object = self.single?;
         Some((object, object != MERGED && !self.instances[object as usize].identity))
+    }
+
+    /// The single object's rays and lanes to trace: `rays` as they are, or (`transformed`)
+    /// moved into its object space, in `local`.
+    #[inline(always)]
+    fn object_rays<'a>(
+        &self,
+        object: u32,
+        transformed: bool,
+        rays: &'a RayPacket,
+        active: u8,
+        local: &'a mut Option<(RayPacket, u8)>,
+    ) -> (&'a RayPacket, u8) {
+        if !transformed {
+            return (rays, active);
+        }
+        let (local_rays, ok) = local.insert(self.object_space_rays(object, rays, active));
+        (local_rays, *ok)
     }
 
     /// The rays of instance `object`'s object space, and the lanes to trace there: lanes

@@ -86,6 +86,15 @@ fn lockstep_films_equal_scalar_films_on_builtin_scenes() {
     }
 }
 
+/// Rows wider than a pool (`integrator::pool::POOL` pixels): several pools per row, the
+/// last one partly filled and ending in a partial group of eight.
+#[test]
+fn lockstep_films_equal_scalar_films_with_several_pools_per_row() {
+    let width = 2 * filtrace_render::integrator::pool::POOL as u32 + 13;
+    let scene = filtrace_scene::builtin("cornell").unwrap();
+    assert_identical("cornell, several pools per row", &scene, width, 3, 3);
+}
+
 #[test]
 fn lockstep_films_equal_scalar_films_with_every_feature() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_all_features.toml");

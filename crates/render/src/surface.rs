@@ -199,17 +199,16 @@ impl SceneGeometry {
     }
 
     /// For triangle `prim` of instance `instance` when its mesh has neither vertex normals
-    /// nor uvs: the row of its record in [`Self::tri_words`] and its material (the lockstep
-    /// integrator's vector `from_hit`; other hits go through
+    /// nor uvs: the row of its record in [`Self::tri_words`] (the lockstep integrator's
+    /// vector `from_hit`, which reads the material from the row; other hits go through
     /// [`SurfaceInteraction::from_hit`]).
     #[inline]
-    pub(crate) fn plain_row(&self, instance: u32, prim: u32) -> Option<(usize, MaterialId)> {
+    pub(crate) fn plain_row(&self, instance: u32, prim: u32) -> Option<usize> {
         let inst = &self.instances[instance as usize];
         if inst.has_normals || inst.has_uvs {
             return None;
         }
-        let row = (inst.first_tri + prim) as usize;
-        Some((row, self.tris[row].material))
+        Some((inst.first_tri + prim) as usize)
     }
 
     /// The triangle records as rows of [`TRI_FLOATS`] words (the material as its bits).

@@ -425,6 +425,17 @@ const fn compress_table() -> [[u32; LANES]; 256] {
     t
 }
 
+/// The lanes of `v` set in `keep` moved to the front in lane order, the others after them
+/// (one `vpermps` with AVX2).
+#[inline(always)]
+fn compress<const A: bool>(v: Raw, keep: u8) -> Raw {
+    let idx = &COMPRESS[keep as usize];
+    avx_or!(A, _mm256_permutevar8x32_ps(v, _mm256_loadu_si256(idx.as_ptr() as *const __m256i)), {
+        let a = raw_to_i(v);
+        raw_from_i(per_lane(|j| a[idx[j] as usize]))
+    })
+}
+
 /// Stores the lanes of `v` set in `keep` at `dst[at..]`, packed in lane order; the words
 /// up to `dst[at + 8]` after them are overwritten with the other lanes. `dst` may be the
 /// slice `v` was loaded from (`at` at most the lane's old index: the stream compaction of
@@ -432,34 +443,14 @@ const fn compress_table() -> [[u32; LANES]; 256] {
 #[inline(always)]
 pub fn compress_store<const A: bool>(v: F8<A>, keep: u8, dst: &mut [f32], at: usize) {
     let dst: &mut [f32; LANES] = (&mut dst[at..at + LANES]).try_into().expect("eight words");
-    avx_or!(
-        A,
-        {
-            let idx = _mm256_loadu_si256(COMPRESS[keep as usize].as_ptr() as *const __m256i);
-            _mm256_storeu_ps(dst.as_mut_ptr(), _mm256_permutevar8x32_ps(v.0, idx))
-        },
-        {
-            let a = v.to_array();
-            *dst = per_lane(|j| a[COMPRESS[keep as usize][j] as usize]);
-        }
-    )
+    *dst = F8::<A>(compress::<A>(v.0, keep)).to_array();
 }
 
 /// [`compress_store`] of `u32` lanes.
 #[inline(always)]
 pub fn compress_store_u32<const A: bool>(v: U8<A>, keep: u8, dst: &mut [u32], at: usize) {
     let dst: &mut [u32; LANES] = (&mut dst[at..at + LANES]).try_into().expect("eight words");
-    avx_or!(
-        A,
-        {
-            let idx = _mm256_loadu_si256(COMPRESS[keep as usize].as_ptr() as *const __m256i);
-            _mm256_storeu_ps(dst.as_mut_ptr() as *mut f32, _mm256_permutevar8x32_ps(v.0, idx))
-        },
-        {
-            let a = v.to_array();
-            *dst = per_lane(|j| a[COMPRESS[keep as usize][j] as usize]);
-        }
-    )
+    *dst = U8::<A>(compress::<A>(v.0, keep)).to_array();
 }
 
 /// `src[at..at + 8]` as lanes.

@@ -214,7 +214,7 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
             let i = b.trailing_zeros() as usize;
             b &= b - 1;
             match ctx.geometry.plain_row(hits.instance[i], hits.prim[i]) {
-                Some((row, _)) => {
+                Some(row) => {
                     plain |= 1 << i;
                     start[i] = row * TRI_FLOATS;
                 }

@@ -191,6 +191,26 @@ unsafe fn closest_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8
     }
 }
 
+/// The groups of the flat `blas` set in `groups` (bit `g` = group `g`), in index order.
+#[inline(always)]
+fn touched<'a>(blas: &'a Blas, groups: u32) -> impl Iterator<Item = &'a FlatGroup> + 'a {
+    let mut left = groups;
+    std::iter::from_fn(move || {
+        if left == 0 {
+            return None;
+        }
+        let g = left.trailing_zeros() as usize;
+        left &= left - 1;
+        Some(&blas.flat_groups[g])
+    })
+}
+
+/// The triangles of group `g` of the flat `blas`.
+#[inline(always)]
+fn group_tris<'a>(blas: &'a Blas, g: &FlatGroup) -> &'a [FlatTri] {
+    &blas.flat_tris[g.first as usize..(g.first + g.count) as usize]
+}
+
 /// The sheared vertices of a flat mesh's vertex table that a packet needs, indexed as the
 /// table (`FlatTri::corners` are byte offsets into it).
 struct ShearedVerts([MaybeUninit<[__m256; 3]>; MAX_FLAT_VERTS]);
@@ -201,12 +221,7 @@ impl ShearedVerts {
     /// Shears the vertices of `blas.flat_verts` set in the groups' masks of `groups`.
     #[inline(always)]
     unsafe fn new<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3], groups: u32) -> Self {
-        let mut needed = 0u64;
-        let mut left = groups;
-        while left != 0 {
-            needed |= blas.flat_groups[left.trailing_zeros() as usize].verts;
-            left &= left - 1;
-        }
+        let mut needed = touched(blas, groups).fold(0u64, |m, g| m | g.verts);
         let mut table = ShearedVerts([MaybeUninit::uninit(); MAX_FLAT_VERTS]);
         while needed != 0 {
             let j = needed.trailing_zeros() as usize;
@@ -237,11 +252,8 @@ unsafe fn closest_flat_table<const UNIFORM: bool>(
     let sv = ShearedVerts::new::<UNIFORM>(blas, r, k, groups);
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     let mut best = Best8::new(r.t_max);
-    let mut left = groups;
-    while left != 0 {
-        let g = &blas.flat_groups[left.trailing_zeros() as usize];
-        left &= left - 1;
-        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+    for g in touched(blas, groups) {
+        let tris = group_tris(blas, g);
         for tri in tris {
             let [a, b, c] = tri.corners.map(|o| sv.at(o));
             closest_sheared::<UNIFORM>(&mut best, &mut out, r, tri, a, b, c);
@@ -260,11 +272,8 @@ unsafe fn closest_flat_k<const UNIFORM: bool>(
 ) -> Closest8 {
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     let mut best = Best8::new(r.t_max);
-    let mut left = groups;
-    while left != 0 {
-        let g = &blas.flat_groups[left.trailing_zeros() as usize];
-        left &= left - 1;
-        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+    for g in touched(blas, groups) {
+        let tris = group_tris(blas, g);
         let mut i = 0;
         while i < tris.len() {
             let tri = &tris[i];
@@ -371,11 +380,8 @@ unsafe fn occluded_flat_table<const UNIFORM: bool>(
     // per-triangle update of the active lanes, and the inactive ones are masked by
     // `t_min_act`. The packet stops once per group when all lanes are occluded.
     let mut occluded = _mm256_setzero_ps();
-    let mut left = groups;
-    while left != 0 {
-        let g = &blas.flat_groups[left.trailing_zeros() as usize];
-        left &= left - 1;
-        for tri in &blas.flat_tris[g.first as usize..(g.first + g.count) as usize] {
+    for g in touched(blas, groups) {
+        for tri in group_tris(blas, g) {
             let [a, b, c] = tri.corners.map(|o| sv.at(o));
             occluded = _mm256_or_ps(occluded, any_hits(r, tri, a, b, c));
         }
@@ -409,11 +415,8 @@ unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usi
     // the packet stops once per group when all have.
     let mut act = r.act;
     let mut occluded = _mm256_setzero_ps();
-    let mut left = groups;
-    while left != 0 {
-        let g = &blas.flat_groups[left.trailing_zeros() as usize];
-        left &= left - 1;
-        let tris = &blas.flat_tris[g.first as usize..(g.first + g.count) as usize];
+    for g in touched(blas, groups) {
+        let tris = group_tris(blas, g);
         let mut i = 0;
         while i < tris.len() {
             let tri = &tris[i];

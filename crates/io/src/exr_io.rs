@@ -199,7 +199,10 @@ impl ExrImage {
 }
 
 /// Writes all channels as one single-part float32 EXR (ZIP compression, scan lines),
-/// channels sorted by name as the format requires.
+/// channels sorted by name as the format requires. The file is encoded in memory and
+/// written by [`crate::write_atomic`]: a failed write leaves what was at `path` as it was
+/// (the `exr` crate's own `to_file` deletes the file on an error), and `path` may be a pipe
+/// or a device (the encoder seeks back to its offset table, which a pipe cannot do).
 pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError> {
     let path = path.as_ref();
     if image.width == 0 || image.height == 0 {
@@ -226,7 +229,9 @@ pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError
     );
     let exr = x::Image::from_layer(layer);
     use x::WritableImage;
-    exr.write().to_file(path).map_err(|e| exr_error(path, e))
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    exr.write().to_buffered(&mut bytes).map_err(|e| exr_error(path, e))?;
+    crate::write_atomic(path, |w| w.write_all(bytes.get_ref()))
 }
 
 fn exr_error(path: &Path, e: exr::error::Error) -> IoError {

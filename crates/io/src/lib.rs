@@ -15,6 +15,9 @@
 //!   filmic curve). Non-finite values are written as 0 and counted, never smeared.
 //! - [`write_image`]: a single image (an error map, a filtered frame) as EXR or PNG by
 //!   file extension.
+//! - [`write_atomic`]: how every output file of filtrace is written (a temporary file
+//!   renamed into place when complete: a failed write never destroys the old file), and
+//!   [`check_writable`], the same checks made before a long computation.
 //!
 //! ```
 //! use filtrace_core::Image;
@@ -35,10 +38,12 @@
 //! ```
 
 pub mod aliases;
+mod atomic;
 mod error;
 mod exr_io;
 mod png_io;
 
+pub use atomic::{check_writable, write_atomic};
 pub use error::IoError;
 pub use exr_io::{read_exr, write_exr, ExrImage};
 pub use png_io::{srgb_eotf, srgb_oetf, tonemap_srgb8, write_png, PngReport, Tonemap, TonemapParams};

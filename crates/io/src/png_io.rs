@@ -112,7 +112,8 @@ pub fn tonemap_srgb8(image: &Image, params: &TonemapParams) -> (Vec<u8>, usize) 
     (out, nonfinite)
 }
 
-/// Writes `image` as a tonemapped 8-bit sRGB PNG.
+/// Writes `image` as a tonemapped 8-bit sRGB PNG (encoded in memory, then written by
+/// [`crate::write_atomic`]: a failed write leaves what was at `path` as it was).
 pub fn write_png(
     path: impl AsRef<Path>,
     image: &Image,
@@ -130,10 +131,10 @@ pub fn write_png(
     let (bytes, nonfinite) = tonemap_srgb8(image, params);
     let buf = image::RgbImage::from_raw(image.width() as u32, image.height() as u32, bytes)
         .expect("3 bytes per pixel");
-    buf.save_with_format(path, image::ImageFormat::Png).map_err(|e| match e {
-        image::ImageError::IoError(source) => IoError::Io { path: path.to_path_buf(), source },
-        source => IoError::Png { path: path.to_path_buf(), source },
-    })?;
+    let mut encoded = std::io::Cursor::new(Vec::new());
+    buf.write_to(&mut encoded, image::ImageFormat::Png)
+        .map_err(|source| IoError::Png { path: path.to_path_buf(), source })?;
+    crate::write_atomic(path, |w| w.write_all(encoded.get_ref()))?;
     Ok(PngReport { nonfinite })
 }
 

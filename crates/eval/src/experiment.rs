@@ -365,7 +365,7 @@ pub fn run_experiment(
                     }
                     _ => {
                         let img = backend.render_reference(spec, scene)?;
-                        crate::pfm::write_pfm(&path, &img).map_err(|e| format!("{}: {e}", path.display()))?;
+                        crate::pfm::write_pfm(&path, &img).map_err(|e| e.to_string())?;
                         (img, format!("{} spp render ({})", spec.reference.spp, key))
                     }
                 }

@@ -44,7 +44,7 @@ pub fn denoise(
     let (c, a, n, o) =
         (work.join("color.pfm"), work.join("albedo.pfm"), work.join("normal.pfm"), work.join("out.pfm"));
     for (p, im) in [(&c, color), (&a, albedo), (&n, normal)] {
-        crate::pfm::write_pfm(p, im).map_err(|e| format!("{}: {e}", p.display()))?;
+        crate::pfm::write_pfm(p, im).map_err(|e| e.to_string())?;
     }
     std::fs::remove_file(&o).ok();
     let t = Instant::now();

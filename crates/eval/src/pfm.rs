@@ -2,13 +2,15 @@
 //! experiments and to exchange images with Intel Open Image Denoise's `oidnDenoise`.
 //! Colour (`PF`, 3 channels) or greyscale (`Pf`); little-endian; rows stored bottom to top.
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 use filtrace_core::Image;
 
-/// Writes a 1- or 3-channel image (other channel counts: the first three, zero-padded).
-pub fn write_pfm(path: &Path, img: &Image) -> std::io::Result<()> {
+/// Writes a 1- or 3-channel image (other channel counts: the first three, zero-padded),
+/// through `filtrace_io::write_atomic`, so that an interrupted write never leaves a
+/// truncated reference in the experiment cache.
+pub fn write_pfm(path: &Path, img: &Image) -> Result<(), filtrace_io::IoError> {
     let (w, h, c) = (img.width(), img.height(), img.channels());
     let out_c = if c == 1 { 1 } else { 3 };
     let mut bytes = format!("{}\n{w} {h}\n-1.0\n", if out_c == 3 { "PF" } else { "Pf" }).into_bytes();
@@ -21,7 +23,7 @@ pub fn write_pfm(path: &Path, img: &Image) -> std::io::Result<()> {
             }
         }
     }
-    std::fs::File::create(path)?.write_all(&bytes)
+    filtrace_io::write_atomic(path, |w| w.write_all(&bytes))
 }
 
 /// Reads a PFM written by [`write_pfm`] or another program (either byte order).

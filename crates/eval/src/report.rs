@@ -9,11 +9,11 @@ use filtrace_core::{Image, Vec3};
 
 use crate::experiment::{Entry, Results};
 
-/// Writes `report.html`, `results.json` and `results.csv` into `out`.
+/// Writes `report.html`, `results.json` and `results.csv` into `out` (each through
+/// `filtrace_io::write_atomic`: a failed write keeps the previous file).
 pub fn write_all(out: &Path, results: &Results) -> Result<(), String> {
     let w = |name: &str, text: String| {
-        let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))
+        filtrace_io::write_atomic(out.join(name), |f| f.write_all(text.as_bytes())).map_err(|e| e.to_string())
     };
     w("results.json", serde_json::to_string_pretty(results).map_err(|e| e.to_string())?)?;
     w("results.csv", csv(results))?;

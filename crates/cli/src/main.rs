@@ -31,6 +31,7 @@ enum Command {
 }
 
 fn main() {
+    exit_cleanly_on_println_failure();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => cmd::render::run(a),
@@ -40,6 +41,9 @@ fn main() {
         Command::Bench { which } => cmd::bench::run(which),
     };
     if let Err(e) = result {
+        if let Some(io) = cmd::output::stdout_failure(&e) {
+            cmd::output::exit_on_stdout_failure(io);
+        }
         // A cancelled render has written its partial output already.
         if e.downcast_ref::<cmd::render::Interrupted>().is_some() {
             std::process::exit(130);
@@ -64,4 +68,29 @@ fn error_chain(e: &anyhow::Error) -> String {
         msg.push_str(&text);
     }
     msg
+}
+
+/// Results are printed through `cmd::output`, but a `println!` left anywhere (or in a
+/// library) panics when stdout is a closed pipe or a full disk. This hook turns exactly
+/// that panic (std's message "failed printing to stdout: ...") into the same clean exit;
+/// every other panic keeps the default report. Tested by tests/outputs.rs through the
+/// binary, so a change of std's wording is caught.
+fn exit_cleanly_on_println_failure() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let text = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if let Some(cause) = text.strip_prefix("failed printing to stdout: ") {
+            if cause.contains("Broken pipe") {
+                std::process::exit(141);
+            }
+            eprintln!("error: cannot write to standard output: {cause}");
+            std::process::exit(1);
+        }
+        default(info)
+    }));
 }

@@ -3,6 +3,7 @@
 //! generation/storage at several sample rates. Prints markdown tables, or JSON.
 
 use filtrace_adaptive::bench::{run as run_bench, BenchConfig};
+use std::io::Write;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -42,10 +43,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..BenchConfig::paper()
     };
     let report = run_bench(&config)?;
+    let mut out = super::output::stdout();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print!("{}", report.to_markdown());
+        write!(out, "{}", report.to_markdown())?;
     }
-    Ok(())
+    Ok(out.flush()?)
 }

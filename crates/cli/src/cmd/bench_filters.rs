@@ -7,6 +7,7 @@
 //! normal, position and depth edges): the filters' cost does not depend on the content.
 //! Each configuration is run `--repeats` times after one warm-up; the median is reported.
 
+use std::io::Write;
 use std::time::Instant;
 
 use filtrace_core::Image;
@@ -26,8 +27,9 @@ pub struct Args {
     /// Skip the (slow, O(r^2)) cross-bilateral rows.
     #[arg(long)]
     pub no_bilateral: bool,
-    /// Run only the Bauszat table rows whose filter name contains this (e.g. `guided`), and
-    /// skip the Dammertz table unless it is `a-trous` (for profiling one filter).
+    /// Run only the Bauszat table rows whose filter name (a-trous, cross-bilateral, guided)
+    /// contains this (e.g. `guided`), and skip the Dammertz table unless it is `a-trous`
+    /// (for profiling one filter).
     #[arg(long)]
     pub only: Option<String>,
     /// Print one JSON object instead of tables.
@@ -89,8 +91,27 @@ fn atrous_with_weights(iterations: u32, weights: usize) -> AtrousParams {
     }
 }
 
+/// The filter names `--only` selects from.
+const FILTER_NAMES: [&str; 3] = ["a-trous", "cross-bilateral", "guided"];
+
+/// `--only` must select at least one row: an unknown name is an error, not empty tables.
+fn check_only(only: &str, no_bilateral: bool) -> anyhow::Result<()> {
+    let selected: Vec<&str> = FILTER_NAMES
+        .into_iter()
+        .filter(|n| n.contains(only) && !(no_bilateral && *n == "cross-bilateral"))
+        .collect();
+    anyhow::ensure!(
+        !selected.is_empty(),
+        "--only {only:?} selects no filter{}: the filters are {}",
+        if no_bilateral { " (with --no-bilateral)" } else { "" },
+        FILTER_NAMES.join(", ")
+    );
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.repeats > 0, "--repeats must be at least 1");
+    check_only(args.only.as_deref().unwrap_or(""), args.no_bilateral)?;
     let fixed = args.res.as_deref().map(parse_res).transpose()?;
     let mut dammertz_res =
         fixed.map(|r| vec![r]).unwrap_or_else(|| vec![(512, 512), (1024, 1024), (1920, 1080)]);
@@ -148,19 +169,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
 
+    let mut out = super::output::stdout();
     if args.json {
-        let out = json!({
+        let report = json!({
             "threads": threads,
             "repeats": args.repeats,
             "statistic": "median over repeats; ms = wall clock, cpu_ms = CPU time of all threads",
             "dammertz2010_table2": dammertz,
             "bauszat2011_table2": {"width": w, "height": h, "rows": bauszat},
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+        return Ok(out.flush()?);
     }
-    println!("## À-Trous filter time in ms (Dammertz et al. 2010, Table 2 shape), {threads} threads\n");
-    println!("Each cell: median wall-clock ms / median CPU ms divided by {threads} threads.\n");
+    writeln!(out, "## À-Trous filter time in ms (Dammertz et al. 2010, Table 2 shape), {threads} threads\n")?;
+    writeln!(out, "Each cell: median wall-clock ms / median CPU ms divided by {threads} threads.\n")?;
     let mut header = String::from("| # W |");
     let mut rule = String::from("|---:|");
     for &(w, h) in &dammertz_res {
@@ -169,7 +191,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             rule += "---:|";
         }
     }
-    println!("{header}\n{rule}");
+    writeln!(out, "{header}\n{rule}")?;
     for weights in 0..=3 {
         let mut line = format!("| {weights} |");
         for &(w, h) in &dammertz_res {
@@ -181,18 +203,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 line += &format!(" {:.1} / {:.1} |", get("ms"), get("cpu_ms") / threads as f64);
             }
         }
-        println!("{line}");
+        writeln!(out, "{line}")?;
     }
-    println!("\n## Filter execution time in ms at {w}x{h} (Bauszat et al. 2011, Table 2 shape)\n");
-    println!("| filter | setting | wall ms | CPU ms / {threads} |\n|---|---|---:|---:|");
+    writeln!(out, "\n## Filter execution time in ms at {w}x{h} (Bauszat et al. 2011, Table 2 shape)\n")?;
+    writeln!(out, "| filter | setting | wall ms | CPU ms / {threads} |\n|---|---|---:|---:|")?;
     for r in &bauszat {
-        println!(
+        writeln!(
+            out,
             "| {} | {} | {:.1} | {:.1} |",
             r["filter"].as_str().unwrap_or(""),
             r["setting"].as_str().unwrap_or(""),
             r["ms"].as_f64().unwrap_or(f64::NAN),
             r["cpu_ms"].as_f64().unwrap_or(f64::NAN) / threads as f64
-        );
+        )?;
     }
-    Ok(())
+    Ok(out.flush()?)
 }

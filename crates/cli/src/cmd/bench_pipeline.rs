@@ -10,6 +10,7 @@
 
 use filtrace_pipeline::{FilterChoice, FrameTimings, PipelineSettings};
 use serde::Serialize;
+use std::io::Write;
 
 use super::render::{parse_resolution, Resolution};
 
@@ -18,6 +19,7 @@ pub struct Args {
     /// Built-in scene name or scene file.
     #[arg(default_value = "cornell")]
     pub scene: String,
+    /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
     #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
     pub res: Resolution,
     /// Eye samples per pixel (the guide ray included).
@@ -32,7 +34,8 @@ pub struct Args {
     /// Preset of the filter (applies to every filter listed; default: the paper's).
     #[arg(long)]
     pub filter_preset: Option<String>,
-    #[arg(long, default_value_t = 1)]
+    /// Paths estimating the indirect light at each guide ray (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub indirect_paths: u32,
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10000))]
     pub frames: u32,
@@ -161,20 +164,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         triangles,
         rows,
     };
+    let mut out = super::output::stdout();
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-        return Ok(());
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+        return Ok(out.flush()?);
     }
-    println!(
+    writeln!(
+        out,
         "filtered pipeline: {} {}x{}, {} spp, {} indirect path(s), max depth {}, {} threads, {} triangles, median of {} frames",
         report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, threads, triangles, a.frames
-    );
-    println!();
-    println!("| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free |");
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    )?;
+    writeln!(out)?;
+    writeln!(out, "| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free |")?;
+    writeln!(out, "|---|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     for r in &report.rows {
         let m: Vec<f64> = r.stages.iter().map(|s| s.median_ms).collect();
-        println!(
+        writeln!(
+            out,
             "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {} |",
             r.filter,
             m[0],
@@ -185,7 +191,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             r.fps_median,
             r.cpu_ms_mean.map_or("-".into(), |c| format!("{c:.0}")),
             r.fps_if_cores_free.map_or("-".into(), |f| format!("{f:.1}"))
-        );
+        )?;
     }
-    Ok(())
+    Ok(out.flush()?)
 }

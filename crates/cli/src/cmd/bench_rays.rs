@@ -4,6 +4,7 @@
 use super::render::{parse_resolution, Resolution};
 use anyhow::Context;
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
+use std::io::Write;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -12,7 +13,7 @@ pub struct Args {
     /// Number of incoherent rays (origins uniform in the bounds, directions uniform on the sphere).
     #[arg(long, default_value_t = 1 << 20)]
     pub rays: usize,
-    /// Primary-ray image size (one ray per pixel).
+    /// Primary-ray image size WIDTHxHEIGHT, each side 1..=32768 (one ray per pixel).
     #[arg(long, default_value = "1024x1024", value_parser = parse_resolution)]
     pub res: Resolution,
     /// Worker threads (default: all cores).
@@ -46,10 +47,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let mut report = pool.install(|| ray_bench(&scene, &opts));
     report.scene = args.mesh.clone();
+    let mut out = super::output::stdout();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!("{}", report.to_markdown());
+        writeln!(out, "{}", report.to_markdown())?;
     }
-    Ok(())
+    Ok(out.flush()?)
 }

@@ -4,12 +4,14 @@
 use super::render::{parse_resolution, Resolution};
 use filtrace_render::{render_bench, RenderSettings, Renderer};
 use serde::Serialize;
+use std::io::Write;
 
 #[derive(clap::Args)]
 pub struct Args {
     /// Scene: a built-in name or a file.
     #[arg(default_value = "cornell")]
     pub scene: String,
+    /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
     #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
     pub res: Resolution,
     /// Samples per pixel of each timed render.
@@ -85,24 +87,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         build_s: renderer.build_seconds(),
         rows,
     };
+    let mut out = super::output::stdout();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print_table(&report);
+        print_table(&mut out, &report)?;
     }
-    Ok(())
+    Ok(out.flush()?)
 }
 
-fn print_table(r: &Report) {
-    println!(
+fn print_table(out: &mut impl Write, r: &Report) -> std::io::Result<()> {
+    writeln!(
+        out,
         "path tracer: {} {} at {} spp, max depth {}, {} triangles, build {:.4} s\n",
         r.scene, r.res, r.spp, r.max_depth, r.triangles, r.build_s
-    );
-    println!("| threads | samples | seconds | M samples/s | speed-up | mean RGB |");
-    println!("|---:|---:|---:|---:|---:|---|");
+    )?;
+    writeln!(out, "| threads | samples | seconds | M samples/s | speed-up | mean RGB |")?;
+    writeln!(out, "|---:|---:|---:|---:|---:|---|")?;
     let base = r.rows.first().map(|row| row.samples_per_s).unwrap_or(1.0);
     for row in &r.rows {
-        println!(
+        writeln!(
+            out,
             "| {} | {} | {:.3} | {:.3} | {:.2} | {:.5} {:.5} {:.5} |",
             row.threads,
             row.samples,
@@ -112,6 +117,7 @@ fn print_table(r: &Report) {
             row.mean_rgb[0],
             row.mean_rgb[1],
             row.mean_rgb[2]
-        );
+        )?;
     }
+    Ok(())
 }

@@ -7,6 +7,7 @@
 use anyhow::Context;
 use filtrace_eval::metrics::{self, Metrics};
 use serde::Serialize;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug, Clone)]
@@ -51,33 +52,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let image = read(&args.image, &args.layer)?;
     let reference = read(&args.reference, &args.reference_layer)?;
+    let maps = if args.no_maps { Vec::new() } else { prepare_maps(&args)? };
     let m = metrics::compare(&image, &reference).with_context(|| {
         format!("cannot compare {} with {}", args.image.display(), args.reference.display())
     })?;
-
-    let mut maps = Vec::new();
-    if !args.no_maps {
-        let dir = match &args.out_dir {
-            Some(d) => d.clone(),
-            None => args.image.parent().map(Path::to_path_buf).unwrap_or_default(),
-        };
-        if !dir.as_os_str().is_empty() {
-            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        }
-        let stem = args.image.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("image".into());
-        let stem = if args.layer == "color" { stem } else { format!("{stem}.{}", args.layer) };
-        let relmse = metrics::rel_mse_map(&image, &reference)?;
-        let flip = metrics::flip_map(&image, &reference)?;
-        let relmse_shown = metrics::log_scale(&relmse, 1e-4, 1.0);
-        for (name, map, shown) in [("relmse", &relmse, &relmse_shown), ("flip", &flip, &flip)] {
-            let exr = dir.join(format!("{stem}.{name}.exr"));
-            let png = dir.join(format!("{stem}.{name}.png"));
-            filtrace_io::write_image(&exr, map)?;
-            filtrace_io::write_image(&png, &metrics::false_color(shown))?;
-            maps.extend([exr, png]);
-        }
+    if !maps.is_empty() {
+        write_maps(&maps, &image, &reference)?;
     }
 
+    let mut out = super::output::stdout();
     if args.json {
         let report = Report {
             image: &args.image,
@@ -88,26 +71,93 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             metrics: &m,
             error_maps: maps,
         };
-        println!("{}", serde_json::to_string(&report)?);
-        return Ok(());
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        return Ok(out.flush()?);
     }
-    println!("{} ({}) vs {}", args.image.display(), args.layer, args.reference.display());
-    println!("  MSE     {:.6e}", m.mse);
-    println!("  relMSE  {:.6e}", m.rel_mse);
+    writeln!(out, "{} ({}) vs {}", args.image.display(), args.layer, args.reference.display())?;
+    writeln!(out, "  MSE     {:.6e}", m.mse)?;
+    writeln!(out, "  relMSE  {:.6e}", m.rel_mse)?;
     match m.psnr {
-        Some(p) => println!("  PSNR    {p:.3} dB (peak 1.0, clamped)"),
-        None => println!("  PSNR    inf (identical after clamping)"),
+        Some(p) => writeln!(out, "  PSNR    {p:.3} dB (peak 1.0, clamped)")?,
+        None => writeln!(out, "  PSNR    inf (identical after clamping)")?,
     }
-    println!("  SSIM    {:.6}", m.ssim);
-    println!("  FLIP    {:.6}", m.flip);
+    writeln!(out, "  SSIM    {:.6}", m.ssim)?;
+    writeln!(out, "  FLIP    {:.6}", m.flip)?;
     if m.nonfinite_image + m.nonfinite_reference > 0 {
-        println!(
+        writeln!(
+            out,
             "  warning: non-finite values read as 0: {} in the image, {} in the reference",
             m.nonfinite_image, m.nonfinite_reference
-        );
+        )?;
     }
     for p in &maps {
-        println!("  wrote {}", p.display());
+        writeln!(out, "  wrote {}", p.display())?;
+    }
+    Ok(out.flush()?)
+}
+
+/// The error map files: `<stem>[.<layer>].{relmse,flip}.{exr,png}` in `--out-dir` or beside
+/// IMAGE.
+fn map_paths(args: &Args) -> Vec<PathBuf> {
+    let dir = match &args.out_dir {
+        Some(d) => d.clone(),
+        None => args.image.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let stem = args.image.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("image".into());
+    let stem = if args.layer == "color" { stem } else { format!("{stem}.{}", args.layer) };
+    let mut paths = Vec::new();
+    for name in ["relmse", "flip"] {
+        for ext in ["exr", "png"] {
+            paths.push(dir.join(format!("{stem}.{name}.{ext}")));
+        }
+    }
+    paths
+}
+
+/// Refuses to write a map over either input (`compare x.exr x.relmse.exr` would overwrite
+/// its reference) and checks every map can be written, before the maps are computed.
+fn check_map_paths(args: &Args, maps: &[PathBuf]) -> anyhow::Result<()> {
+    let inputs: Vec<PathBuf> =
+        [&args.image, &args.reference].iter().filter_map(|p| std::fs::canonicalize(p).ok()).collect();
+    for map in maps {
+        if let Ok(canonical) = std::fs::canonicalize(map) {
+            if inputs.contains(&canonical) {
+                anyhow::bail!(
+                    "the error map {} would overwrite an input image: rename the input, or use \
+                     --out-dir or --no-maps",
+                    map.display()
+                );
+            }
+        }
+        filtrace_io::check_writable(map).context("cannot write the error maps (see --out-dir, --no-maps)")?;
+    }
+    Ok(())
+}
+
+/// [`map_paths`], their folder created and each checked by [`check_map_paths`].
+fn prepare_maps(args: &Args) -> anyhow::Result<Vec<PathBuf>> {
+    let paths = map_paths(args);
+    if let Some(dir) = paths[0].parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    check_map_paths(args, &paths)?;
+    Ok(paths)
+}
+
+/// Computes and writes the relMSE and FLIP maps (EXR values, false-colour PNGs) to `paths`
+/// (as [`map_paths`] orders them).
+fn write_maps(
+    paths: &[PathBuf],
+    image: &filtrace_core::Image,
+    reference: &filtrace_core::Image,
+) -> anyhow::Result<()> {
+    let relmse = metrics::rel_mse_map(image, reference)?;
+    let flip = metrics::flip_map(image, reference)?;
+    let relmse_shown = metrics::log_scale(&relmse, 1e-4, 1.0);
+    let maps = [(&relmse, &relmse_shown), (&flip, &flip)];
+    for ((map, shown), pair) in maps.into_iter().zip(paths.chunks(2)) {
+        filtrace_io::write_image(&pair[0], map)?;
+        filtrace_io::write_image(&pair[1], &metrics::false_color(shown))?;
     }
     Ok(())
 }

@@ -5,6 +5,7 @@
 //! spec format and `experiments/` for checked-in specs.
 
 use std::collections::HashMap;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -132,6 +133,10 @@ impl Backend for PipelineBackend {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let spec = ExperimentSpec::load(&a.spec).map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", a.out.display()))?;
+    // Before the (long) runs, not after them.
+    for name in ["report.html", "results.json", "results.csv"] {
+        filtrace_io::check_writable(a.out.join(name))?;
+    }
     let threads = a
         .threads
         .map(|t| t as usize)
@@ -152,10 +157,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     results.notes.push(format!("{threads} worker threads."));
     filtrace_eval::report::write_all(&a.out, &results).map_err(|e| anyhow::anyhow!("{e}"))?;
-    println!("| scene | method | spp | relMSE | PSNR | frame ms |");
-    println!("|---|---|---:|---:|---:|---:|");
+    let mut out = super::output::stdout();
+    writeln!(out, "| scene | method | spp | relMSE | PSNR | frame ms |")?;
+    writeln!(out, "|---|---|---:|---:|---:|---:|")?;
     for e in &results.entries {
-        println!(
+        writeln!(
+            out,
             "| {} | {} | {} | {:.4e} | {} | {:.1} |",
             e.scene,
             e.method,
@@ -163,10 +170,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             e.errors.rel_mse,
             e.errors.psnr.map_or("inf".into(), |p| format!("{p:.2}")),
             e.total_ms
-        );
+        )?;
     }
-    println!("wrote {}", a.out.join("report.html").display());
-    Ok(())
+    writeln!(out, "wrote {}", a.out.join("report.html").display())?;
+    Ok(out.flush()?)
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod args;
 pub mod bench;
 pub mod bench_adaptive;
 pub mod bench_filters;
@@ -9,5 +10,6 @@ pub mod bench_render;
 pub mod compare;
 pub mod denoise;
 pub mod experiment;
+pub mod output;
 pub mod render;
 pub mod render_filtered;

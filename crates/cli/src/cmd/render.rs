@@ -56,8 +56,8 @@ pub struct CommonArgs {
     /// Samples per pixel added per progressive pass (default: spp/16, at least 1).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub passes_spp: Option<u32>,
-    /// PNG exposure in stops.
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    /// PNG exposure in stops (a finite number).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = super::args::finite_f32)]
     pub exposure: f32,
     /// PNG with a filmic curve instead of the plain sRGB clamp.
     #[arg(long)]
@@ -154,9 +154,10 @@ impl CommonArgs {
             .unwrap_or_else(|| PathBuf::from("filtrace-out").join(format!("{}.exr", self.scene_name())))
     }
 
-    /// [`CommonArgs::output_path`], checked before any work: it must end in `.exr` and its
-    /// folder is created now, so that a long render never fails at the end for want of a
-    /// place to write.
+    /// [`CommonArgs::output_path`], checked before any work: it must end in `.exr`, its
+    /// folder is created now, and the EXR and the PNG beside it must be writable
+    /// ([`filtrace_io::check_writable`]), so that a long render never fails at the end for
+    /// want of a place to write.
     pub fn prepare_output(&self) -> anyhow::Result<PathBuf> {
         let out = self.output_path();
         let is_exr = out.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
@@ -172,6 +173,9 @@ impl CommonArgs {
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create output folder {}", dir.display()))?;
+        }
+        for path in [out.clone(), out.with_extension("png")] {
+            filtrace_io::check_writable(&path).context("the output cannot be written (see --out)")?;
         }
         Ok(out)
     }

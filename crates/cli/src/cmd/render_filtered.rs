@@ -36,8 +36,8 @@ pub struct FilterArgs {
     /// Number of À-Trous levels.
     #[arg(long, requires = "filter")]
     pub filter_iterations: Option<u32>,
-    /// Paths estimating the indirect light at each guide ray (Bauszat: 1).
-    #[arg(long, default_value_t = 1, requires = "filter")]
+    /// Paths estimating the indirect light at each guide ray (Bauszat: 1; at least 1).
+    #[arg(long, default_value_t = 1, requires = "filter", value_parser = clap::value_parser!(u32).range(1..))]
     pub indirect_paths: u32,
     /// Filter the direct light too (for comparison; the paper filters only the indirect).
     #[arg(long, requires = "filter")]

@@ -13,6 +13,7 @@
 //! assert_eq!(scene.triangle_count(), 36);
 //! ```
 
+pub mod animation;
 pub mod builtin;
 pub mod error;
 pub mod gltf_load;

@@ -22,6 +22,7 @@ pub mod obj;
 pub mod ply;
 pub mod shapes;
 pub mod texture;
+pub mod toml_animation;
 pub mod toml_scene;
 pub mod types;
 pub mod validate;

@@ -7,9 +7,11 @@
 //! [`TrackError`] into an error naming their file and line.
 
 mod rig;
+mod scene_anim;
 mod track;
 
 pub use rig::{CameraTrack, Clock, ClockError, TransformTrack};
+pub use scene_anim::{LightTrack, ObjectTrack, Pose, SceneAnimation};
 pub use track::{hermite, normalized_rotations, Interpolation, Keyable, Track, TrackError};
 
 #[cfg(test)]

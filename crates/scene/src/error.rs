@@ -44,3 +44,8 @@ impl std::error::Error for SceneError {
         }
     }
 }
+
+/// The 1-based line of byte offset `span.start` in `src` (for TOML spans).
+pub(crate) fn line_of(src: &str, span: std::ops::Range<usize>) -> usize {
+    src[..span.start.min(src.len())].bytes().filter(|&b| b == b'\n').count() + 1
+}

@@ -13,6 +13,7 @@
 //! assert_eq!(scene.triangle_count(), 36);
 //! ```
 
+pub mod animation;
 pub mod builtin;
 pub mod error;
 pub mod gltf_load;
@@ -21,6 +22,7 @@ pub mod obj;
 pub mod ply;
 pub mod shapes;
 pub mod texture;
+pub mod toml_animation;
 pub mod toml_scene;
 pub mod types;
 pub mod validate;

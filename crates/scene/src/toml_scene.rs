@@ -35,8 +35,9 @@ use filtrace_core::{Affine3A, Mat4, Quat, Rgb, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::error::SceneError;
+use crate::error::{line_of, SceneError};
 use crate::shapes;
+use crate::toml_animation::{build_animation, AnimationDef, ObjectTarget, Targets, TrackDef};
 use crate::types::{
     Bsdf, Camera, Environment, Instance, Light, Material, MaterialId, MeshId, Scene, Texturable, TextureId,
 };
@@ -54,6 +55,9 @@ struct SceneFile {
     objects: Vec<Spanned<ObjectDef>>,
     #[serde(default)]
     lights: Vec<Spanned<LightDef>>,
+    animation: Option<Spanned<AnimationDef>>,
+    #[serde(default)]
+    tracks: Vec<Spanned<TrackDef>>,
 }
 
 #[derive(Deserialize)]
@@ -120,6 +124,8 @@ enum ScaleDef {
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct LightDef {
+    /// Names the light for animation tracks.
+    name: Option<String>,
     #[serde(rename = "type")]
     kind: String,
     position: Option<V3>,
@@ -161,10 +167,6 @@ pub fn load_toml(path: &Path) -> Result<Scene, SceneError> {
     parse_toml(&src, path)
 }
 
-fn line_of(src: &str, span: Range<usize>) -> usize {
-    src[..span.start.min(src.len())].bytes().filter(|&b| b == b'\n').count() + 1
-}
-
 /// Parses a TOML scene; paths inside are relative to `path`'s folder.
 pub fn parse_toml(src: &str, path: &Path) -> Result<Scene, SceneError> {
     let file: SceneFile = toml::from_str(src).map_err(|e| {
@@ -181,6 +183,8 @@ pub fn parse_toml(src: &str, path: &Path) -> Result<Scene, SceneError> {
         textures: HashMap::new(),
         files: HashMap::new(),
         default_mat: None,
+        anim_objects: HashMap::new(),
+        anim_lights: HashMap::new(),
     };
     b.scene.name = file
         .name
@@ -198,6 +202,14 @@ pub fn parse_toml(src: &str, path: &Path) -> Result<Scene, SceneError> {
     for l in &file.lights {
         b.light(l)?;
     }
+    let targets = Targets {
+        objects: &b.anim_objects,
+        lights: &b.anim_lights,
+        scene_lights: &b.scene.lights,
+        camera: b.scene.camera.as_ref(),
+    };
+    let animation = build_animation(src, path, file.animation.as_ref(), &file.tracks, &targets)?;
+    b.scene.animation = animation;
     Ok(b.scene)
 }
 
@@ -216,6 +228,9 @@ struct Builder<'a> {
     textures: HashMap<PathBuf, TextureId>,
     files: HashMap<PathBuf, LoadedFile>,
     default_mat: Option<MaterialId>,
+    /// Named objects and lights, for animation tracks.
+    anim_objects: HashMap<String, ObjectTarget>,
+    anim_lights: HashMap<String, u32>,
 }
 
 fn finite3(v: V3) -> bool {
@@ -442,10 +457,11 @@ impl Builder<'_> {
             return Err(self.err(span, "`segments` applies only to shape = \"sphere\""));
         }
         match (&o.mesh, &o.shape) {
-            (Some(_), None) if o.name.is_some() => {
-                Err(self.err(span, "`name` applies only to shapes (a mesh file keeps its own names)"))
+            (Some(file), None) => {
+                let first = (self.scene.instances.len(), self.scene.lights.len());
+                self.mesh_file(&span, file, transform, material)?;
+                self.name_object(&span, o.name.as_deref(), transform, first)
             }
-            (Some(file), None) => self.mesh_file(&span, file, transform, material),
             (None, Some(shape)) => {
                 let mat = match material {
                     Some(m) => m,
@@ -468,13 +484,38 @@ impl Builder<'_> {
                 if let Some(n) = &o.name {
                     mesh.name = n.clone();
                 }
+                let first = (self.scene.instances.len(), self.scene.lights.len());
                 let id = self.scene.meshes.len() as MeshId;
                 self.scene.meshes.push(mesh);
                 self.scene.instances.push(Instance { mesh: id, transform, material_override: None });
-                Ok(())
+                self.name_object(&span, o.name.as_deref(), transform, first)
             }
             _ => Err(self.err(span, "an object needs exactly one of `mesh` (a file) or `shape`")),
         }
+    }
+
+    /// Records a named object (its instances and lights from index `first` on) so that
+    /// animation tracks can move it.
+    fn name_object(
+        &mut self,
+        span: &Range<usize>,
+        name: Option<&str>,
+        transform: Affine3A,
+        first: (usize, usize),
+    ) -> Result<(), SceneError> {
+        let Some(name) = name else { return Ok(()) };
+        if self.anim_objects.contains_key(name) || self.anim_lights.contains_key(name) || name == "camera" {
+            return Err(self.err(span.clone(), format!("the name '{name}' is used twice")));
+        }
+        let to_object = transform.inverse();
+        let instances = (first.0..self.scene.instances.len())
+            .map(|i| (i as u32, to_object * self.scene.instances[i].transform))
+            .collect();
+        let lights = (first.1..self.scene.lights.len())
+            .map(|i| (i as u32, self.scene.lights[i].transformed(&to_object)))
+            .collect();
+        self.anim_objects.insert(name.to_string(), ObjectTarget { transform, instances, lights });
+        Ok(())
     }
 
     fn mesh_file(
@@ -504,7 +545,7 @@ impl Builder<'_> {
                 material_override: material.or(i.material_override),
             })
             .collect();
-        let lights: Vec<Light> = f.lights.iter().map(|l| transform_light(l, &transform)).collect();
+        let lights: Vec<Light> = f.lights.iter().map(|l| l.transformed(&transform)).collect();
         self.scene.instances.extend(insts);
         self.scene.lights.extend(lights);
         Ok(())
@@ -671,8 +712,9 @@ impl Builder<'_> {
                 let mat = self.scene.add_material(mat);
                 let mut mesh = shapes::parallelogram(c, e1, e2, mat);
                 mesh.name = "quad_light".into();
+                let first = (self.scene.instances.len(), self.scene.lights.len());
                 self.scene.add_mesh(mesh);
-                return Ok(());
+                return self.name_object(&span, l.name.as_deref(), Affine3A::IDENTITY, first);
             }
             other => {
                 return Err(self.err(
@@ -683,28 +725,14 @@ impl Builder<'_> {
                 ))
             }
         };
+        if let Some(name) = &l.name {
+            if self.anim_objects.contains_key(name) || self.anim_lights.contains_key(name) || name == "camera"
+            {
+                return Err(self.err(span, format!("the name '{name}' is used twice")));
+            }
+            self.anim_lights.insert(name.clone(), self.scene.lights.len() as u32);
+        }
         self.scene.lights.push(light);
         Ok(())
-    }
-}
-
-/// A light of a mesh file placed by `m`.
-fn transform_light(l: &Light, m: &Affine3A) -> Light {
-    let d = |v: Vec3| m.transform_vector3(v).normalize_or(v);
-    match l.clone() {
-        Light::Point { position, intensity } => {
-            Light::Point { position: m.transform_point3(position), intensity }
-        }
-        Light::Spot { position, direction, intensity, cos_total_width, cos_falloff_start } => Light::Spot {
-            position: m.transform_point3(position),
-            direction: d(direction),
-            intensity,
-            cos_total_width,
-            cos_falloff_start,
-        },
-        Light::Directional { direction, irradiance } => {
-            Light::Directional { direction: d(direction), irradiance }
-        }
-        env @ Light::Environment(_) => env,
     }
 }

@@ -133,6 +133,31 @@ pub enum Light {
     Environment(Environment),
 }
 
+impl Light {
+    /// This light placed by `m` (positions moved, directions turned; environments stay).
+    pub fn transformed(&self, m: &Affine3A) -> Light {
+        let d = |v: Vec3| m.transform_vector3(v).normalize_or(v);
+        match self.clone() {
+            Light::Point { position, intensity } => {
+                Light::Point { position: m.transform_point3(position), intensity }
+            }
+            Light::Spot { position, direction, intensity, cos_total_width, cos_falloff_start } => {
+                Light::Spot {
+                    position: m.transform_point3(position),
+                    direction: d(direction),
+                    intensity,
+                    cos_total_width,
+                    cos_falloff_start,
+                }
+            }
+            Light::Directional { direction, irradiance } => {
+                Light::Directional { direction: d(direction), irradiance }
+            }
+            env @ Light::Environment(_) => env,
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub enum Environment {
     /// The same radiance from every direction (the white-furnace light).
@@ -182,6 +207,8 @@ pub struct Scene {
     /// `None` when the file had no camera; callers frame the bounds then.
     pub camera: Option<Camera>,
     pub stats: LoadStats,
+    /// What moves over time; `None` for a still scene.
+    pub animation: Option<crate::animation::SceneAnimation>,
 }
 
 impl Scene {

@@ -183,7 +183,12 @@ fn malformed_toml_errors_name_file_and_line() {
         "unknown material 'nope'",
     );
     expect_error("unknown-shape", "[[objects]]\nshape = \"torus\"\n", 1, "unknown shape");
-    expect_error("mesh-name", "[[objects]]\nmesh = \"a.obj\"\nname = \"x\"\n", 1, "only to shapes");
+    expect_error(
+        "name-twice",
+        "[[objects]]\nshape = \"cube\"\nname = \"x\"\n[[objects]]\nshape = \"quad\"\nname = \"x\"\n",
+        4,
+        "used twice",
+    );
     expect_error("mesh-and-shape", "[[objects]]\nshape = \"cube\"\nmesh = \"a.obj\"\n", 1, "exactly one");
     expect_error("missing-mesh", "\n[[objects]]\nmesh = \"nowhere.obj\"\n", 2, "nowhere.obj");
     expect_error("singular", "[[objects]]\nshape = \"cube\"\ntransform = { scale = 0 }\n", 1, "invertible");

@@ -15,6 +15,7 @@
 
 pub mod builtin;
 pub mod error;
+mod gltf_accessor;
 pub mod gltf_load;
 pub mod load;
 pub mod obj;

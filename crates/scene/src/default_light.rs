@@ -18,7 +18,7 @@ use crate::types::{Environment, Light, Scene};
 /// The light a bare mesh file gets: a neutral sky (zenith 1, horizon 0.8, ground 0.3) and
 /// a sun of irradiance 2 from the upper right, in front (direction towards it
 /// (0.5, 1, 0.8), normalised), so that shapes read under the default camera (which looks
-/// along -z from +z, y up). A grey (0.5) surface facing the sun is about 0.6.
+/// along -z from +z, y up). A grey (0.5) surface facing the sun comes out at roughly 0.7.
 pub fn default_lights() -> Vec<Light> {
     vec![
         Light::Environment(Environment::Sky {

@@ -62,15 +62,12 @@ fn check_accessor(
         .checked_mul(stride)
         .and_then(|x| x.checked_add(acc.offset()))
         .and_then(|x| x.checked_add(elem));
-    match end {
-        Some(end) if end <= view.length() => {}
-        _ => return Err(format!(
-            "{at}: {} elements from byte {} (stride {stride}) run past the end of bufferView {} ({} bytes)",
-            acc.count(),
-            acc.offset(),
-            view.index(),
-            view.length()
-        )),
+    if !matches!(end, Some(end) if end <= view.length()) {
+        let (count, offset, v) = (acc.count(), acc.offset(), view.index());
+        let len = view.length();
+        return Err(format!(
+            "{at}: {count} elements from byte {offset} (stride {stride}) run past the end of bufferView {v} ({len} bytes)"
+        ));
     }
     let data_len = buffers.get(view.buffer().index()).map_or(0, |d| d.len());
     match view.offset().checked_add(view.length()) {

@@ -66,6 +66,9 @@ fn expect_error(tag: &str, json: &str, want: &[&str]) {
     }
 }
 
+/// The triangle's u16 indices.
+const IDX: &str = r#"{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}"#;
+
 const POS: &str =
     r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}"#;
 
@@ -142,7 +145,7 @@ fn accessors_outside_their_data_are_errors_naming_mesh_and_primitive() {
         (
             "pos-past-view",
             format!(
-                r#"{{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}"#
+                r#"{{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {IDX}"#
             ),
             "POSITION",
         ),
@@ -150,7 +153,7 @@ fn accessors_outside_their_data_are_errors_naming_mesh_and_primitive() {
         (
             "overflow",
             format!(
-                r#"{{"bufferView": 0, "componentType": 5126, "count": 4611686018427387904, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}"#
+                r#"{{"bufferView": 0, "componentType": 5126, "count": 4611686018427387904, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {IDX}"#
             ),
             "POSITION",
         ),
@@ -158,7 +161,7 @@ fn accessors_outside_their_data_are_errors_naming_mesh_and_primitive() {
         (
             "stride",
             format!(
-                r#"{{"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}"#
+                r#"{{"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {IDX}"#
             ),
             "byteStride 4",
         ),
@@ -166,7 +169,7 @@ fn accessors_outside_their_data_are_errors_naming_mesh_and_primitive() {
         (
             "pos-u16",
             format!(
-                r#"{{"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}"#
+                r#"{{"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}}, {IDX}"#
             ),
             "POSITION",
         ),
@@ -184,7 +187,7 @@ fn accessors_outside_their_data_are_errors_naming_mesh_and_primitive() {
         (
             "idx-value",
             format!(
-                r#"{{"bufferView": 0, "componentType": 5126, "count": 2, "type": "VEC3", "min": [0,0,0], "max": [1,0,0]}}, {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}"#
+                r#"{{"bufferView": 0, "componentType": 5126, "count": 2, "type": "VEC3", "min": [0,0,0], "max": [1,0,0]}}, {IDX}"#
             ),
             "out of range",
         ),

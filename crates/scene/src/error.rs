@@ -22,17 +22,27 @@ impl SceneError {
     }
 }
 
+/// `s` with control characters (ESC, BEL, CR, ...) written as escapes (`\u{1b}`), so that text
+/// quoted from a file cannot drive the terminal it is printed on.
+pub fn escape_control(s: &str) -> String {
+    if !s.chars().any(char::is_control) {
+        return s.to_string();
+    }
+    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
+}
+
 impl fmt::Display for SceneError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            SceneError::Io { path, source } => write!(f, "{}: {}", path.display(), source),
+        let text = match self {
+            SceneError::Io { path, source } => format!("{}: {}", path.display(), source),
             SceneError::Parse { path, line: Some(l), message } => {
-                write!(f, "{}:{}: {}", path.display(), l, message)
+                format!("{}:{}: {}", path.display(), l, message)
             }
-            SceneError::Parse { path, line: None, message } => write!(f, "{}: {}", path.display(), message),
-            SceneError::Unsupported { what } => write!(f, "unsupported: {what}"),
-            SceneError::Invalid { message } => write!(f, "invalid scene: {message}"),
-        }
+            SceneError::Parse { path, line: None, message } => format!("{}: {}", path.display(), message),
+            SceneError::Unsupported { what } => format!("unsupported: {what}"),
+            SceneError::Invalid { message } => format!("invalid scene: {message}"),
+        };
+        f.write_str(&escape_control(&text))
     }
 }
 

@@ -16,21 +16,42 @@
 //!   - glTF and filtrace both use perceptual roughness (`alpha = r^2`): copied as is.
 //!   - Emission: `emissiveFactor` x the average of the emissive texture (not per texel);
 //!     `doubleSided` materials emit from both faces.
-//! - `KHR_lights_punctual`: point (intensity in cd taken as W/sr), spot (inner/outer cone
-//!   angles), directional (intensity in lux taken as irradiance); `range` is ignored.
-//! - Camera: the first perspective camera met in a depth-first walk of the scene's nodes.
+//! - `KHR_lights_punctual`: point, spot (inner/outer cone angles), directional; `range` is
+//!   ignored. Intensities are photometric (cd, lux) and divided by [`LUMENS_PER_WATT`].
+//! - `KHR_materials_emissive_strength` multiplies the emissive factor. Other extensions in
+//!   `extensionsUsed` are ignored with a warning.
+//! - Nodes must form disjoint trees (no cycles, one parent at most), else an error naming
+//!   the node; at most [`MAX_GLTF_INSTANCES`] instances.
+//! - Accessors are checked before they are read (`gltf_accessor`): out of range, wrong
+//!   type or sparse is an error naming mesh, primitive and attribute.
+//! - Camera: the first perspective camera met in a depth-first walk of the scene's nodes;
+//!   `yfov` must be in (0, pi).
 
 use std::collections::HashMap;
 use std::path::Path;
 
-use filtrace_core::{Affine3A, Mat4, Rgb, Vec2, Vec3};
+use filtrace_core::{Affine3A, Mat4, Rgb, Vec3};
 
 use crate::error::SceneError;
-use crate::obj::is_degenerate;
+use crate::gltf_accessor::read_primitive;
 use crate::texture::srgb_to_linear;
 use crate::types::{
-    Bsdf, Camera, Instance, Light, Material, MaterialId, Mesh, MeshId, Scene, Texturable, Texture, TextureId,
+    Bsdf, Camera, Instance, Light, Material, MaterialId, MeshId, Scene, Texturable, Texture, TextureId,
 };
+
+/// Luminous efficacy used to turn KHR_lights_punctual's photometric units into radiometric
+/// ones (lm/W): the maximum efficacy, at 555 nm, which Blender's exporter also uses
+/// (`PBR_WATTS_TO_LUMENS`).
+pub const LUMENS_PER_WATT: f32 = 683.0;
+
+/// Most instances one glTF file may place. Nodes form trees (checked), so instances grow
+/// only with nodes x primitives; 4M instances (about 300 MB with the top-level BVH)
+/// is far above real files (2CylinderEngine: 115) and stops a hostile file early.
+pub const MAX_GLTF_INSTANCES: usize = 1 << 22;
+
+/// Extensions whose content is read; any other extension in `extensionsUsed` is ignored
+/// with a warning (an unsupported one in `extensionsRequired` is refused by the `gltf` crate).
+pub const GLTF_EXTENSIONS_READ: &[&str] = &["KHR_lights_punctual", "KHR_materials_emissive_strength"];
 
 /// Loads a `.gltf` or `.glb` file.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
@@ -39,25 +60,51 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
         ..Scene::default()
     };
+    let ignored: Vec<&str> = doc.extensions_used().filter(|e| !GLTF_EXTENSIONS_READ.contains(e)).collect();
+    if !ignored.is_empty() {
+        scene.stats.warnings.push(format!(
+            "{}: glTF extensions not supported, ignored: {}",
+            path.display(),
+            ignored.join(", ")
+        ));
+    }
     let mut ctx =
         Ctx { scene: &mut scene, images: &images, image_textures: HashMap::new(), default_mat: None };
+    let materials = doc.materials().map(|m| ctx.material(&m)).collect::<Result<Vec<_>, _>>();
+    let materials = materials.map_err(|m| SceneError::parse(path, None, m))?;
+    let prims = read_meshes(&doc, &buffers, &materials, &mut ctx, path)?;
 
-    // Materials, in document order.
-    let materials: Vec<MaterialId> = doc.materials().map(|m| ctx.material(&m)).collect();
+    // Nodes of the default scene (or the first), depth first.
+    let Some(gscene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
+        return Err(SceneError::parse(path, None, "glTF file has no scene"));
+    };
+    check_node_trees(&doc).map_err(|m| SceneError::parse(path, None, m))?;
+    walk_nodes(&gscene, &prims, ctx.scene, MAX_GLTF_INSTANCES)
+        .map_err(|m| SceneError::parse(path, None, m))?;
+    Ok(scene)
+}
 
-    // Meshes: one of ours per primitive.
-    let mut prims: Vec<Vec<MeshId>> = Vec::new();
+/// One of our meshes per triangle primitive, by glTF mesh: `result[mesh][k]`.
+fn read_meshes(
+    doc: &gltf::Document,
+    buffers: &[gltf::buffer::Data],
+    materials: &[MaterialId],
+    ctx: &mut Ctx,
+    path: &Path,
+) -> Result<Vec<Vec<MeshId>>, SceneError> {
+    let mut prims = Vec::new();
     for mesh in doc.meshes() {
         let mut ids = Vec::new();
         for prim in mesh.primitives() {
+            let at = format!(
+                "mesh {} ({}) primitive {}",
+                mesh.index(),
+                mesh.name().unwrap_or("unnamed"),
+                prim.index()
+            );
             if prim.mode() != gltf::mesh::Mode::Triangles {
-                ctx.scene.stats.warnings.push(format!(
-                    "{}: mesh {} primitive {}: mode {:?} is not triangles, skipped",
-                    path.display(),
-                    mesh.index(),
-                    prim.index(),
-                    prim.mode()
-                ));
+                let w = format!("{}: {at}: mode {:?} is not triangles, skipped", path.display(), prim.mode());
+                ctx.scene.stats.warnings.push(w);
                 continue;
             }
             let mat = match prim.material().index() {
@@ -65,61 +112,149 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
                 None => ctx.default_material(),
             };
             let name = format!("{}#{}", mesh.name().unwrap_or("mesh"), prim.index());
-            let m = read_primitive(
-                &prim,
-                &buffers,
-                mat,
-                &name,
-                &mut ctx.scene.stats.degenerate_triangles_skipped,
-            )
-            .map_err(|m| SceneError::parse(path, None, format!("mesh {}: {m}", mesh.index())))?;
-            let id = ctx.scene.meshes.len() as MeshId;
+            let skipped = &mut ctx.scene.stats.degenerate_triangles_skipped;
+            let m = read_primitive(&prim, buffers, mat, &name, skipped)
+                .map_err(|m| SceneError::parse(path, None, format!("{at}: {m}")))?;
+            ids.push(ctx.scene.meshes.len() as MeshId);
             ctx.scene.meshes.push(m);
-            ids.push(id);
         }
         prims.push(ids);
     }
+    Ok(prims)
+}
 
-    // Nodes of the default scene (or the first), depth first.
-    let Some(gscene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
-        return Err(SceneError::parse(path, None, "glTF file has no scene"));
-    };
+/// `node 3 ('Arm')`, for messages.
+fn node_label(node: &gltf::Node) -> String {
+    match node.name() {
+        Some(n) => format!("node {} ('{n}')", node.index()),
+        None => format!("node {}", node.index()),
+    }
+}
+
+/// glTF 2.0 (section 3.5.3): nodes form disjoint strict trees, no cycles and at most one
+/// parent each. Shared children would place a subtree once per path (exponentially many
+/// instances for a chain of shared nodes), and a cycle forever, so both are errors.
+fn check_node_trees(doc: &gltf::Document) -> Result<(), String> {
+    let nodes: Vec<gltf::Node> = doc.nodes().collect();
+    let mut parent: Vec<Option<usize>> = vec![None; nodes.len()];
+    for node in &nodes {
+        for child in node.children() {
+            let c = child.index();
+            if c == node.index() {
+                return Err(format!(
+                    "{} lists itself as a child (a cycle in the node hierarchy)",
+                    node_label(node)
+                ));
+            }
+            if parent[c] == Some(node.index()) {
+                return Err(format!(
+                    "{} is listed twice among node {}'s children",
+                    node_label(&child),
+                    node.index()
+                ));
+            }
+            if let Some(p) = parent[c] {
+                return Err(format!(
+                    "{} is a child of both node {p} and node {}: glTF nodes must form disjoint trees",
+                    node_label(&child),
+                    node.index()
+                ));
+            }
+            parent[c] = Some(node.index());
+        }
+    }
+    // With one parent each, a cycle is a closed chain of parent links: follow each chain,
+    // marking the nodes of the current walk, and stop at the first node already settled.
+    let mut state = vec![0u8; nodes.len()]; // 0 new, 1 on this walk, 2 settled
+    for start in 0..nodes.len() {
+        let mut i = start;
+        while state[i] == 0 {
+            state[i] = 1;
+            match parent[i] {
+                Some(p) => i = p,
+                None => break,
+            }
+        }
+        if state[i] == 1 && parent[i].is_some() {
+            return Err(format!(
+                "{} is its own ancestor (a cycle in the node hierarchy)",
+                node_label(&nodes[i])
+            ));
+        }
+        let mut j = start;
+        while state[j] == 1 {
+            state[j] = 2;
+            j = parent[j].unwrap_or(j);
+        }
+    }
+    Ok(())
+}
+
+/// Places the scene's nodes depth first (instances, lights, the first perspective camera).
+/// At most `max_instances` instances.
+fn walk_nodes(
+    gscene: &gltf::Scene,
+    prims: &[Vec<MeshId>],
+    scene: &mut Scene,
+    max_instances: usize,
+) -> Result<(), String> {
+    let mut visited = vec![false; gscene.nodes().map(|n| n.index() + 1).max().unwrap_or(0)];
     let mut stack: Vec<(gltf::Node, Mat4)> = gscene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
     stack.reverse();
     while let Some((node, parent)) = stack.pop() {
+        let i = node.index();
+        if i >= visited.len() {
+            visited.resize(i + 1, false);
+        }
+        if std::mem::replace(&mut visited[i], true) {
+            return Err(format!(
+                "{} is reached twice from scene {}'s root nodes",
+                node_label(&node),
+                gscene.index()
+            ));
+        }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if !world.is_finite() {
-            return Err(SceneError::parse(
-                path,
-                None,
-                format!("node {} has a non-finite transform", node.index()),
-            ));
+            return Err(format!("{} has a non-finite transform", node_label(&node)));
         }
         let affine = Affine3A::from_mat4(world);
         if let Some(mesh) = node.mesh() {
-            for &id in &prims[mesh.index()] {
-                ctx.scene.instances.push(Instance { mesh: id, transform: affine, material_override: None });
+            let ids = &prims[mesh.index()];
+            if scene.instances.len() + ids.len() > max_instances {
+                return Err(format!("more than {max_instances} instances (at {})", node_label(&node)));
+            }
+            for &id in ids {
+                scene.instances.push(Instance { mesh: id, transform: affine, material_override: None });
             }
         }
         if let Some(light) = node.light() {
-            ctx.scene.lights.push(convert_light(&light, &affine));
+            scene.lights.push(convert_light(&light, &affine));
         }
-        if let (Some(cam), None) = (node.camera(), &ctx.scene.camera) {
-            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
-                let eye = affine.transform_point3(Vec3::ZERO);
-                let fwd = affine.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
-                let up = affine.transform_vector3(Vec3::Y).normalize_or_zero();
-                if fwd != Vec3::ZERO && up != Vec3::ZERO {
-                    ctx.scene.camera =
-                        Some(Camera { eye, target: eye + fwd, up, vfov_deg: p.yfov().to_degrees() });
-                }
-            }
+        if let (Some(cam), None) = (node.camera(), &scene.camera) {
+            scene.camera = convert_camera(&cam, &affine)?;
         }
         let mut children: Vec<_> = node.children().map(|c| (c, world)).collect();
         children.reverse();
         stack.extend(children);
     }
-    Ok(scene)
+    Ok(())
+}
+
+/// A perspective camera at the node (looking along its -Z, up +Y); `None` for orthographic
+/// cameras and degenerate transforms. `yfov` outside (0, π) is an error.
+fn convert_camera(cam: &gltf::Camera, affine: &Affine3A) -> Result<Option<Camera>, String> {
+    let gltf::camera::Projection::Perspective(p) = cam.projection() else { return Ok(None) };
+    let yfov = p.yfov();
+    if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+        return Err(format!("camera {}: yfov {yfov} rad is outside (0, pi)", cam.index()));
+    }
+    let eye = affine.transform_point3(Vec3::ZERO);
+    let fwd = affine.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
+    let up = affine.transform_vector3(Vec3::Y).normalize_or_zero();
+    if fwd == Vec3::ZERO || up == Vec3::ZERO {
+        return Ok(None);
+    }
+    Ok(Some(Camera { eye, target: eye + fwd, up, vfov_deg: yfov.to_degrees() }))
 }
 
 fn gltf_error(path: &Path, e: gltf::Error) -> SceneError {
@@ -168,10 +303,21 @@ impl Ctx<'_> {
         t
     }
 
-    fn material(&mut self, m: &gltf::Material) -> MaterialId {
+    /// Our material for a glTF material (approximations in the module docs). A base colour
+    /// outside [0, 1] (the specification's range; above 1 a surface would create energy) is
+    /// an error naming the material.
+    fn material(&mut self, m: &gltf::Material) -> Result<MaterialId, String> {
+        let name =
+            m.name().map(str::to_string).unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();
         let base = Rgb::new(r, g, b);
+        if !(base.min_element() >= 0.0 && base.max_element() <= 1.0) {
+            return Err(format!(
+                "material {} ('{name}'): baseColorFactor [{r}, {g}, {b}] is outside [0, 1]",
+                m.index().unwrap_or(0)
+            ));
+        }
         let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
         let bsdf = if pbr.metallic_factor() > 0.5 {
             let f0 = base.clamp(Rgb::ZERO, Rgb::splat(0.99));
@@ -193,7 +339,9 @@ impl Ctx<'_> {
                 Bsdf::Diffuse { reflectance: diffuse }
             }
         };
-        let mut emission = Rgb::from(m.emissive_factor());
+        // KHR_materials_emissive_strength scales the (0..1) emissive factor: Blender writes
+        // a strength-5 emitter as factor 1, strength 5.
+        let mut emission = Rgb::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
         if let Some(t) = m.emissive_texture() {
             if let Some(id) = self.texture(t.texture().source().index()) {
                 let tex = &self.scene.textures[id as usize];
@@ -201,9 +349,7 @@ impl Ctx<'_> {
                 emission *= avg;
             }
         }
-        let name =
-            m.name().map(str::to_string).unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
-        self.scene.add_material(Material { name, bsdf, emission, two_sided_emission: m.double_sided() })
+        Ok(self.scene.add_material(Material { name, bsdf, emission, two_sided_emission: m.double_sided() }))
     }
 }
 
@@ -245,56 +391,13 @@ fn image_to_texture(img: &gltf::image::Data, index: usize) -> Result<Texture, St
     Ok(t)
 }
 
-fn read_primitive(
-    prim: &gltf::Primitive,
-    buffers: &[gltf::buffer::Data],
-    material: MaterialId,
-    name: &str,
-    skipped: &mut usize,
-) -> Result<Mesh, String> {
-    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-    let positions: Vec<Vec3> =
-        reader.read_positions().ok_or("primitive without POSITION")?.map(Vec3::from).collect();
-    let n = positions.len();
-    let flat: Vec<u32> = match reader.read_indices() {
-        Some(i) => i.into_u32().collect(),
-        None => (0..n as u32).collect(),
-    };
-    if !flat.chunks_exact(3).remainder().is_empty() {
-        return Err(format!("index count {} is not a multiple of 3", flat.len()));
-    }
-    let mut mesh = Mesh { name: name.to_string(), ..Mesh::default() };
-    for t in flat.chunks_exact(3) {
-        let t = [t[0], t[1], t[2]];
-        if let Some(&bad) = t.iter().find(|&&i| i as usize >= n) {
-            return Err(format!("vertex index {bad} out of range ({n} vertices)"));
-        }
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || is_degenerate(t.map(|i| positions[i as usize])) {
-            *skipped += 1;
-            continue;
-        }
-        mesh.indices.push(t);
-        mesh.material_ids.push(material);
-    }
-    if let Some(ns) = reader.read_normals() {
-        let ns: Vec<Vec3> = ns.map(|v| Vec3::from(v).normalize_or_zero()).collect();
-        if ns.len() == n && ns.iter().all(|v| v.is_finite() && *v != Vec3::ZERO) {
-            mesh.normals = ns;
-        }
-    }
-    if let Some(uv) = reader.read_tex_coords(0) {
-        let uv: Vec<Vec2> = uv.into_f32().map(|[u, v]| Vec2::new(u, 1.0 - v)).collect();
-        if uv.len() == n {
-            mesh.uvs = uv;
-        }
-    }
-    mesh.positions = positions;
-    Ok(mesh)
-}
-
+/// KHR_lights_punctual intensities are photometric: candela (lm/sr) for point and spot
+/// lights, lux (lm/m^2) for directional ones. Dividing by [`LUMENS_PER_WATT`] gives W/sr and
+/// W/m^2, which undoes Blender's exporter (a P-watt point light is written as
+/// P / (4 pi) x 683 cd, a sun of S W/m^2 as S x 683 lux).
 fn convert_light(light: &gltf::khr_lights_punctual::Light, m: &Affine3A) -> Light {
     use gltf::khr_lights_punctual::Kind;
-    let power = Rgb::from(light.color()) * light.intensity();
+    let power = Rgb::from(light.color()) * (light.intensity() / LUMENS_PER_WATT);
     let position = m.transform_point3(Vec3::ZERO);
     // glTF lights shine along the node's -Z.
     let forward = m.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
@@ -308,5 +411,28 @@ fn convert_light(light: &gltf::khr_lights_punctual::Light, m: &Affine3A) -> Ligh
             cos_total_width: outer_cone_angle.cos(),
             cos_falloff_start: inner_cone_angle.cos(),
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn instance_count_is_bounded() {
+        // One mesh of one primitive placed by 5 nodes; a limit of 3 stops the walk.
+        let json = r#"{"asset": {"version": "2.0"},
+            "meshes": [{"primitives": [{"attributes": {}}]}],
+            "nodes": [{"mesh": 0}, {"mesh": 0}, {"mesh": 0}, {"mesh": 0}, {"mesh": 0}],
+            "scenes": [{"nodes": [0, 1, 2, 3, 4]}]}"#;
+        let doc = gltf::Gltf::from_slice_without_validation(json.as_bytes()).map(|g| g.document);
+        let doc = doc.unwrap_or_else(|e| panic!("{e}"));
+        let gscene = doc.scenes().next().unwrap_or_else(|| panic!("no scene"));
+        let mut scene = Scene::default();
+        let err = walk_nodes(&gscene, &[vec![0]], &mut scene, 3).unwrap_err();
+        assert!(err.contains("more than 3 instances") && err.contains("node 3"), "{err}");
+        let mut scene = Scene::default();
+        walk_nodes(&gscene, &[vec![0]], &mut scene, 5).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(scene.instances.len(), 5);
     }
 }

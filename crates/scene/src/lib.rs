@@ -15,7 +15,10 @@
 
 pub mod animation;
 pub mod builtin;
+pub mod dedup;
+pub mod default_light;
 pub mod error;
+mod gltf_accessor;
 pub mod gltf_load;
 pub mod load;
 pub mod obj;
@@ -29,5 +32,5 @@ pub mod validate;
 
 pub use builtin::{builtin, builtin_names};
 pub use error::SceneError;
-pub use load::{default_camera_for, load, load_scene};
+pub use load::{default_camera_for, load, load_scene, load_scene_with, load_with, LoadOptions};
 pub use types::*;

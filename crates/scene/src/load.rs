@@ -8,11 +8,49 @@ use crate::builtin::{builtin_names, try_builtin};
 use crate::error::SceneError;
 use crate::types::{Camera, Scene};
 
+/// Choices a caller makes about what loading adds to a scene.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Light a bare mesh file (OBJ, PLY, glTF) that brings no light of its own by
+    /// [`crate::default_light::default_lights`] (with a warning saying so). On by default;
+    /// `render --no-default-light` turns it off.
+    pub default_light: bool,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { default_light: true }
+    }
+}
+
 /// Loads a scene file, choosing the loader from the extension (case-insensitive):
 /// `.obj`, `.gltf`/`.glb`, `.ply`, `.toml`. The result has passed
-/// [`crate::validate::sanitize`]: nothing non-finite, every index in range.
+/// [`crate::validate::sanitize`]: nothing non-finite, every index in range; exact duplicate
+/// triangles are dropped ([`crate::dedup`]); a scene without light or geometry is lit by
+/// default, warned about or refused ([`crate::default_light`]).
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    load_with(path, &LoadOptions::default())
+}
+
+/// [`load`] with explicit options.
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
+    let mut scene = load_part(path)?;
+    let bare_mesh = !extension(path).eq("toml");
+    crate::default_light::check_light_and_geometry(&mut scene, path, bare_mesh, options)?;
+    for w in &mut scene.stats.warnings {
+        *w = crate::error::escape_control(w);
+    }
+    Ok(scene)
+}
+
+fn extension(path: &Path) -> String {
+    path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default()
+}
+
+/// Loads, sanitizes and de-duplicates one file, without the scene-level checks of
+/// [`load_with`]: also used for the mesh files a TOML scene places.
+pub(crate) fn load_part(path: &Path) -> Result<Scene, SceneError> {
+    let ext = extension(path);
     let mut scene = match ext.as_str() {
         "obj" => crate::obj::load_obj(path),
         "ply" => crate::ply::load_ply(path),
@@ -26,11 +64,17 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         }),
     }?;
     crate::validate::sanitize(&mut scene, path)?;
+    crate::dedup::remove_duplicate_triangles(&mut scene, path);
     Ok(scene)
 }
 
 /// A built-in scene name (see [`builtin_names`]) or a path to a scene file.
 pub fn load_scene(arg: &str) -> Result<Scene, SceneError> {
+    load_scene_with(arg, &LoadOptions::default())
+}
+
+/// [`load_scene`] with explicit options (built-in scenes bring their own lights).
+pub fn load_scene_with(arg: &str, options: &LoadOptions) -> Result<Scene, SceneError> {
     if let Some(r) = try_builtin(arg) {
         return r;
     }
@@ -40,7 +84,7 @@ pub fn load_scene(arg: &str) -> Result<Scene, SceneError> {
             what: format!("'{arg}' is neither a built-in scene ({}) nor a file", builtin_names().join(", ")),
         });
     }
-    load(path)
+    load_with(path, options)
 }
 
 /// A camera that sees all of `bounds` from outside: it looks at the centre of the bounding

@@ -80,6 +80,17 @@ pub fn sanitize(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
         if !ok {
             return Err(invalid(format!("material '{}' has a non-finite or out-of-range parameter", m.name)));
         }
+        if let Bsdf::Diffuse { reflectance: Texturable::Constant(c) }
+        | Bsdf::Plastic { diffuse: Texturable::Constant(c), .. } = &m.bsdf
+        {
+            if c.max_element() > 1.0 {
+                warnings.push(format!(
+                    "material '{}': albedo {} above 1 reflects more light than it receives",
+                    m.name,
+                    c.max_element()
+                ));
+            }
+        }
     }
     for t in &mut scene.textures {
         if t.texels.iter().any(|c| !colour_ok(*c)) {

@@ -67,6 +67,10 @@ pub struct CommonArgs {
     /// renderer's default.
     #[arg(long, value_enum)]
     pub trace: Option<TraceArg>,
+    /// Do not light a bare mesh file (.obj, .ply, .gltf/.glb) that has no light of its own
+    /// by the default sky and sun (docs/scenes.md); it then renders black, with a warning.
+    #[arg(long)]
+    pub no_default_light: bool,
 }
 
 /// `--trace` values (filtrace_render::TraceMode).
@@ -125,6 +129,12 @@ pub fn parse_resolution(s: &str) -> Result<Resolution, String> {
 }
 
 impl CommonArgs {
+    /// Loads the scene argument with the load options these flags select.
+    pub fn load_scene(&self) -> Result<filtrace_scene::Scene, filtrace_scene::SceneError> {
+        let options = filtrace_scene::LoadOptions { default_light: !self.no_default_light };
+        filtrace_scene::load_scene_with(&self.scene, &options)
+    }
+
     /// The renderer settings these options select (validated).
     pub fn settings(&self) -> anyhow::Result<RenderSettings> {
         let s = RenderSettings {
@@ -337,8 +347,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let cancel = install_ctrlc();
 
     let t0 = Instant::now();
-    let scene =
-        filtrace_scene::load_scene(&c.scene).with_context(|| format!("cannot load scene '{}'", c.scene))?;
+    let scene = c.load_scene().with_context(|| format!("cannot load scene '{}'", c.scene))?;
     let load_s = t0.elapsed().as_secs_f64();
     let out = c.prepare_output()?;
     let load_warnings = scene.stats.warnings.clone();

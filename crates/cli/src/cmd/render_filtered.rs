@@ -127,9 +127,11 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let choice = filter.choice();
     choice.denoise_filter().map_err(|e| anyhow::anyhow!("{e}"))?;
     let t0 = Instant::now();
-    let scene = filtrace_scene::load_scene(&common.scene)
-        .with_context(|| format!("cannot load scene '{}'", common.scene))?;
+    let scene = common.load_scene().with_context(|| format!("cannot load scene '{}'", common.scene))?;
     let load_s = t0.elapsed().as_secs_f64();
+    if !common.json {
+        scene.stats.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
+    }
     let pool = common.thread_pool()?;
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;

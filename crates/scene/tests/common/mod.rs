@@ -3,15 +3,20 @@
 
 use std::path::PathBuf;
 
-/// `../shared` from the project root, or `None` (with a printed message) when absent.
+/// `../shared` from the project root, or `None` (with a printed message) when absent;
+/// under CI (the `CI` variable set) a missing file fails the test instead of skipping it.
 pub fn shared(rel: &str) -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(rel);
     if p.exists() {
-        Some(p)
-    } else {
-        println!("SKIPPED: {} not found (../shared is absent)", p.display());
-        None
+        return Some(p);
     }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{} not found (../shared is required when CI is set)",
+        p.display()
+    );
+    println!("SKIPPED: {} not found (../shared is absent)", p.display());
+    None
 }
 
 /// Writes `files` (name, content) into a fresh folder under the system temp dir.

@@ -24,12 +24,40 @@ pub struct ExrImage {
     source: Option<PathBuf>,
     /// Notes from reading: parts skipped because their size differs, duplicate names.
     warnings: Vec<String>,
+    /// Text attributes of the header (`name`, `value`), e.g. `filtrace:spp_done`.
+    attributes: Vec<(String, String)>,
 }
 
 impl ExrImage {
     /// An empty image of `width x height` pixels with no channels yet.
     pub fn new(width: usize, height: usize) -> Self {
-        Self { width, height, channels: Vec::new(), source: None, warnings: Vec::new() }
+        Self {
+            width,
+            height,
+            channels: Vec::new(),
+            source: None,
+            warnings: Vec::new(),
+            attributes: Vec::new(),
+        }
+    }
+
+    /// Sets a text attribute of the header (replacing one of the same name), written by
+    /// [`write_exr`] and read back by [`read_exr`]. EXR text is Latin-1: other characters
+    /// are an error.
+    pub fn set_attribute(&mut self, name: &str, value: &str) -> Result<(), IoError> {
+        if x::Text::new_or_none(name).is_none() || x::Text::new_or_none(value).is_none() || name.is_empty() {
+            return Err(IoError::InvalidImage(format!(
+                "EXR attribute '{name}' = '{value}': names and values must be non-empty Latin-1 text"
+            )));
+        }
+        self.attributes.retain(|(n, _)| n != name);
+        self.attributes.push((name.to_string(), value.to_string()));
+        Ok(())
+    }
+
+    /// The text attribute `name` of the header, if any.
+    pub fn attribute(&self, name: &str) -> Option<&str> {
+        self.attributes.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_str())
     }
 
     pub fn width(&self) -> usize {
@@ -221,9 +249,16 @@ pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError
         .iter()
         .map(|c| x::AnyChannel::new(c.name.as_str(), x::FlatSamples::F32(c.data.clone())))
         .collect();
+    let mut attributes = x::LayerAttributes::default();
+    for (name, value) in &image.attributes {
+        // Checked by `set_attribute`.
+        attributes
+            .other
+            .insert(x::Text::new_or_panic(name), x::AttributeValue::Text(x::Text::new_or_panic(value)));
+    }
     let layer = x::Layer::new(
         (image.width, image.height),
-        x::LayerAttributes::default(),
+        attributes,
         x::Encoding::SMALL_LOSSLESS,
         x::AnyChannels::sort(list),
     );
@@ -231,7 +266,39 @@ pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError
     use x::WritableImage;
     let mut bytes = std::io::Cursor::new(Vec::new());
     exr.write().to_buffered(&mut bytes).map_err(|e| exr_error(path, e))?;
-    crate::write_atomic(path, |w| w.write_all(bytes.get_ref()))
+    let mut bytes = bytes.into_inner();
+    if image.attributes.len() > 1 {
+        sort_header_attributes(&mut bytes).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
+    }
+    crate::write_atomic(path, |w| w.write_all(&bytes))
+}
+
+/// Sorts the header attributes of a single-part EXR (in memory) by name. The exr crate
+/// writes custom attributes in `HashMap` order, which changes from run to run; sorted, the
+/// same image gives the same bytes. The header keeps its length, so the offset table after
+/// it stays valid.
+fn sort_header_attributes(file: &mut [u8]) -> std::io::Result<()> {
+    let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, "EXR header not understood");
+    let head = &file[..file.len().min(1 << 22)];
+    let zero_after = |at: usize| head.get(at..).and_then(|b| b.iter().position(|&c| c == 0)).map(|k| at + k);
+    // Magic and version (8 bytes), then `name\0 type\0 size:i32 value` records up to a 0.
+    let mut records: Vec<&[u8]> = Vec::new();
+    let mut at = 8;
+    loop {
+        let name_end = zero_after(at).ok_or_else(bad)?;
+        if name_end == at {
+            break;
+        }
+        let size_at = zero_after(name_end + 1).ok_or_else(bad)? + 1;
+        let size = head.get(size_at..size_at + 4).ok_or_else(bad)?;
+        let end = size_at + 4 + i32::from_le_bytes(size.try_into().map_err(|_| bad())?).max(0) as usize;
+        records.push(head.get(at..end).ok_or_else(bad)?);
+        at = end;
+    }
+    records.sort_by_key(|r| r.split(|&c| c == 0).next().unwrap_or_default());
+    let sorted = records.concat();
+    file[8..8 + sorted.len()].copy_from_slice(&sorted);
+    Ok(())
 }
 
 fn exr_error(path: &Path, e: exr::error::Error) -> IoError {
@@ -267,6 +334,11 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, IoError> {
     let (w, h) = (first.size.0, first.size.1);
     let mut out = ExrImage::new(w, h);
     out.source = Some(path.to_path_buf());
+    for (name, value) in file.attributes.other.iter().chain(&first.attributes.other) {
+        if let x::AttributeValue::Text(t) = value {
+            out.attributes.push((name.to_string(), t.to_string()));
+        }
+    }
     for layer in &file.layer_data {
         let part = layer.attributes.layer_name.as_ref().map(|t| t.to_string());
         if layer.size.0 != w || layer.size.1 != h {

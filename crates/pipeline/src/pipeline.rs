@@ -16,10 +16,20 @@
 //!    most similar of its four neighbouring guide rays (§3.2, eqs. 3-5), re-modulated by its
 //!    own albedo; samples are averaged with a box filter.
 //!
+//! Cancellation ([`FilteredRenderer::set_cancel`]): the flag is polled per row of the guide
+//! rays and per pixel of the further samples, which are traced in passes of sample
+//! indices (1, 1, 2, 4, ... up to [`SAMPLE_PASS_MAX`]). Cancelled during the guide rays,
+//! the frame is an error ([`PipelineError::Cancelled`]); after them, the frame is
+//! completed from the whole passes done: it is then exactly the frame of
+//! [`Frame::spp_done`] samples per pixel.
+//!
 //! The same lookup on the *unfiltered* map gives the `noisy` layer at no extra tracing cost,
 //! so that `noisy = direct + indirect` and, with [`NoFilter`](crate::NoFilter),
 //! `color == noisy`.
 
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 use filtrace_adaptive::{BatchSchedule, Slot};
@@ -34,6 +44,11 @@ use crate::source::{EyeSample, PathSource, SampleKey};
 /// Added to the albedo before demodulating (`E = L_ind / (albedo + eps)`) and after
 /// re-modulating, so that the round trip is exact and black surfaces do not divide by zero.
 pub const DEMODULATION_EPS: f32 = 1e-3;
+
+/// Largest pass of further samples per pixel (sample indices traced between two checks
+/// of whether a cancelled frame may stop): a cancelled frame loses at most this many
+/// samples per pixel of work.
+pub const SAMPLE_PASS_MAX: usize = 16;
 
 /// Largest accepted image side and pixel count (same limits as the renderer).
 pub const MAX_SIDE: u32 = 32768;
@@ -116,6 +131,8 @@ pub enum PipelineError {
     Filter(String),
     /// The batch schedule of the indirect paths could not be built.
     Batch(String),
+    /// The cancel flag was set before the guide rays were done: there is no frame.
+    Cancelled,
 }
 
 impl std::fmt::Display for PipelineError {
@@ -136,6 +153,7 @@ impl std::fmt::Display for PipelineError {
             }
             Self::Filter(e) => write!(f, "filter: {e}"),
             Self::Batch(e) => write!(f, "batch schedule of the indirect paths: {e}"),
+            Self::Cancelled => write!(f, "cancelled before the guide rays were done: no frame"),
             Self::SourceResolution { source, frame } => write!(
                 f,
                 "the path source renders {}x{}, the frame is {}x{}",
@@ -224,6 +242,9 @@ pub struct Frame {
     pub timings: FrameTimings,
     /// Further samples whose four neighbouring guide rays all escaped (no indirect light).
     pub lookup_failures: u64,
+    /// Eye samples per pixel in the images, the guide ray included: the settings' `spp`,
+    /// or fewer when the frame was cancelled.
+    pub spp_done: u32,
 }
 
 /// A further eye sample kept between the samples pass and the lookup pass.
@@ -258,13 +279,20 @@ pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
     settings: PipelineSettings,
     /// Slots per batch of indirect paths (§4.3); `None`: one per pixel, as in the paper.
     batch_size: Option<usize>,
+    /// Set (e.g. by Ctrl-C) to stop the frame early; see the module docs.
+    cancel: Option<Arc<AtomicBool>>,
     buf: Buffers,
 }
 
 impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
         check(&source, &settings)?;
-        Ok(Self { source, filter, settings, batch_size: None, buf: Buffers::default() })
+        Ok(Self { source, filter, settings, batch_size: None, cancel: None, buf: Buffers::default() })
+    }
+
+    /// A flag that, once set, stops the frames at their next check (see the module docs).
+    pub fn set_cancel(&mut self, cancel: Option<Arc<AtomicBool>>) {
+        self.cancel = cancel;
     }
 
     pub fn settings(&self) -> &PipelineSettings {
@@ -330,6 +358,8 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         let start = Instant::now();
         let source = &self.source;
         let buf = &mut self.buf;
+        let (never, flag) = (AtomicBool::new(false), self.cancel.clone());
+        let cancel = flag.as_deref().unwrap_or(&never);
         resize_images(&mut buf.frame.images, w, h, st.filter_direct);
 
         // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
@@ -352,7 +382,8 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 let schedule = BatchSchedule::from_counts(&counts, batch)
                     .map_err(|e| PipelineError::Batch(e.to_string()))?;
                 buf.guide_samples.resize(n, EyeSample::default());
-                guide_pass_batched(source, &schedule, &mut buf.batch, &mut buf.guide_samples, w, st.seed);
+                let bb = &mut buf.batch;
+                guide_pass_batched(source, &schedule, bb, &mut buf.guide_samples, w, st.seed, cancel);
                 let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
                 store_guides(&buf.guide_samples, rows, st.demodulate_albedo);
             }
@@ -360,10 +391,13 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 // The whole frame as one batch: each pixel's paths in one task, stored as
                 // they are traced.
                 let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
-                guide_pass(source, counts, rows, w, st.seed, st.demodulate_albedo);
+                guide_pass(source, counts, rows, w, (st.seed, st.demodulate_albedo), cancel);
             }
         }
         let guide_ms = ms(t0);
+        if cancel.load(Ordering::Relaxed) {
+            return Err(PipelineError::Cancelled);
+        }
 
         // 2. Filter the indirect map guided by the guide rays' normal and depth (§3.3).
         let t1 = Instant::now();
@@ -375,25 +409,23 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         }
         let mut filter_ms = ms(t1);
 
-        // 3. Further eye samples, jittered in the pixel: first hit and direct light only.
+        // 3. Further eye samples, jittered in the pixel: first hit and direct light only, in
+        //    passes of sample indices so that a cancelled frame keeps whole passes.
         let t2 = Instant::now();
         buf.samples.resize(n * extra, SampleRecord::default());
-        if extra > 0 {
-            buf.samples.par_chunks_mut(w * extra).enumerate().for_each(|(y, row)| {
-                for (k, rec) in row.iter_mut().enumerate() {
-                    let (x, s) = (k / extra, (k % extra) as u32 + 1);
-                    let key = SampleKey { x: x as u32, y: y as u32, sample: s, seed: st.seed };
-                    let film = Vec2::new(x as f32, y as f32) + jitter(key);
-                    let e = source.trace(key, film, 0);
-                    *rec = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
-                }
-            });
+        let mut done = 0;
+        while done < extra && !cancel.load(Ordering::Relaxed) {
+            let count = done.clamp(1, SAMPLE_PASS_MAX).min(extra - done);
+            if !samples_pass(source, &mut buf.samples, (w, extra), done..done + count, st.seed, cancel) {
+                break;
+            }
+            done += count;
         }
         let samples_ms = ms(t2);
 
         // 4. Geometry-aware lookup (eqs. 3-5) and box reconstruction.
         let t3 = Instant::now();
-        let failures = lookup_and_reconstruct(buf, w, extra, st.demodulate_albedo);
+        let failures = lookup_and_reconstruct(buf, w, (extra, done), st.demodulate_albedo);
         let lookup_ms = ms(t3);
 
         // Optional: the direct light filtered too (comparison only).
@@ -411,6 +443,7 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         }
 
         buf.frame.lookup_failures = failures;
+        buf.frame.spp_done = done as u32 + 1;
         buf.frame.timings = FrameTimings { guide_ms, filter_ms, samples_ms, lookup_ms, total_ms: ms(start) };
         Ok(&buf.frame)
     }
@@ -485,11 +518,14 @@ fn guide_pass<'a, S: PathSource>(
     counts: PathCounts<'_>,
     rows: impl IndexedParallelIterator<Item = GuideRow<'a>>,
     w: usize,
-    seed: u64,
-    demod: bool,
+    (seed, demod): (u64, bool),
+    cancel: &AtomicBool,
 ) {
     let single = source.traces_single_paths();
     rows.enumerate().for_each(|(y, mut row)| {
+        if cancel.load(Ordering::Relaxed) {
+            return; // the frame is abandoned
+        }
         let mut scratch = Vec::new();
         for x in 0..w {
             let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed };
@@ -564,6 +600,7 @@ fn guide_pass_batched<S: PathSource>(
     out: &mut [EyeSample],
     w: usize,
     seed: u64,
+    cancel: &AtomicBool,
 ) {
     let key_of = |p: usize| SampleKey { x: (p % w) as u32, y: (p / w) as u32, sample: 0, seed };
     // Pixels without paths: first hit and direct light (as `trace(.., 0)`). The others are
@@ -579,6 +616,9 @@ fn guide_pass_batched<S: PathSource>(
     bb.slots.resize(size, Slot::default());
     bb.results.resize(size, EyeSample::default());
     for batch in schedule.batches() {
+        if cancel.load(Ordering::Relaxed) {
+            return; // the frame is abandoned
+        }
         let len = batch.len();
         batch.fill_sample_to_pixel(&mut bb.slots);
         // Trace the batch: each pixel's slot range is one parallel task, so a pixel's
@@ -713,6 +753,35 @@ fn store_guides<'a>(g: &[EyeSample], rows: impl IndexedParallelIterator<Item = G
     });
 }
 
+/// Further samples `range` (0-based: sample index `k + 1`) of every pixel into their
+/// records (`extra` per pixel, rows of `w` pixels in parallel). False when `cancel` stopped
+/// it before every pixel had the whole range.
+fn samples_pass<S: PathSource>(
+    source: &S,
+    samples: &mut [SampleRecord],
+    (w, extra): (usize, usize),
+    range: Range<usize>,
+    seed: u64,
+    cancel: &AtomicBool,
+) -> bool {
+    let stopped = AtomicBool::new(false);
+    samples.par_chunks_mut(w * extra).enumerate().for_each(|(y, row)| {
+        for (x, records) in row.chunks_mut(extra).enumerate() {
+            if cancel.load(Ordering::Relaxed) {
+                stopped.store(true, Ordering::Relaxed);
+                return;
+            }
+            for k in range.clone() {
+                let key = SampleKey { x: x as u32, y: y as u32, sample: k as u32 + 1, seed };
+                let film = Vec2::new(x as f32, y as f32) + jitter(key);
+                let e = source.trace(key, film, 0);
+                records[k] = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
+            }
+        }
+    });
+    !stopped.into_inner()
+}
+
 /// Jitter of further sample `key` inside its pixel, in `[0, 1)^2`: a hash of the key.
 fn jitter(key: SampleKey) -> Vec2 {
     let mut h = key.seed ^ 0x243f_6a88_85a3_08d3;
@@ -722,14 +791,15 @@ fn jitter(key: SampleKey) -> Vec2 {
     Vec2::new(unit_f32(h), unit_f32(splitmix64(h)))
 }
 
-/// Pass 4: for each pixel, the guide sample and every further sample get direct +
-/// re-modulated indirect from the unfiltered and the filtered map; box average.
-/// Returns the number of samples whose lookup found no guide that hit.
-fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool) -> u64 {
+/// Pass 4: for each pixel, the guide sample and its first `done` further samples (of the
+/// `extra` records per pixel) get direct + re-modulated indirect from the unfiltered and
+/// the filtered map; box average. Returns the number of samples whose lookup found no
+/// guide that hit.
+fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, (extra, done): (usize, usize), demod: bool) -> u64 {
     let Buffers { guides, guide_direct, samples, frame, .. } = buf;
     let im = &mut frame.images;
     let (map, fmap, albedo) = (&im.indirect_map, &im.filtered_map, &im.guide.albedo);
-    let inv = 1.0 / (extra + 1) as f32;
+    let inv = 1.0 / (done + 1) as f32;
     let remod = |albedo: Rgb| if demod { albedo + DEMODULATION_EPS } else { Rgb::ONE };
     let row = w * 3;
     let failures = std::sync::atomic::AtomicU64::new(0);
@@ -750,7 +820,7 @@ fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool
                 let mut d = guide_direct[own];
                 let mut ind = m * map_rgb(map, own);
                 let mut find = m * map_rgb(fmap, own);
-                for rec in &samples[own * extra..(own + 1) * extra] {
+                for rec in &samples[own * extra..own * extra + done] {
                     d += rec.direct;
                     let Some(hit) = &rec.hit else { continue };
                     match most_similar_guide(guides, rec.film, hit) {

@@ -78,6 +78,12 @@ impl FilmPixel {
         }
     }
 
+    /// Samples traced for this pixel: kept plus dropped.
+    #[inline]
+    pub fn traced(&self) -> u32 {
+        self.samples + self.dropped
+    }
+
     /// Mean colour (zero without samples).
     #[inline]
     pub fn mean(&self) -> [f64; 3] {
@@ -169,6 +175,17 @@ impl Film {
         self.pixels.iter().map(|p| p.samples).min().unwrap_or(0)
     }
 
+    /// Largest per-pixel sample count (0 for an empty film).
+    pub fn max_samples(&self) -> u32 {
+        self.pixels.iter().map(|p| p.samples).max().unwrap_or(0)
+    }
+
+    /// Pixels for which no sample was traced yet (a render cut short before its first pass
+    /// ended). Their AOVs would read as black, so such a film is not an image.
+    pub fn pixels_without_samples(&self) -> usize {
+        self.pixels.iter().filter(|p| p.traced() == 0).count()
+    }
+
     /// Number of samples dropped because they were not finite.
     pub fn dropped_samples(&self) -> u64 {
         self.pixels.iter().map(|p| p.dropped as u64).sum()
@@ -243,6 +260,9 @@ mod tests {
         assert_eq!(f.total_samples(), 1);
         assert_eq!(f.dropped_samples(), 2);
         assert_eq!(f.min_samples(), 0);
+        assert_eq!(f.max_samples(), 1);
+        assert_eq!(f.pixels_without_samples(), 0, "a pixel whose samples were all dropped was traced");
+        assert_eq!(Film::new(3, 1).pixels_without_samples(), 3);
         let a = f.aovs();
         assert_eq!(a.color.count_non_finite(), 0);
         assert_eq!(a.color.rgb(0, 0), Rgb::ONE);

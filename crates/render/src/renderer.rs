@@ -18,7 +18,14 @@
 //! within one task, so the film is bit-identical whatever the thread count or tile order.
 //!
 //! Parallelism: a pass splits the image into bands of [`TILE_ROWS`] rows (the tiles),
-//! processed by rayon on the current thread pool; `cancel` is checked before each tile.
+//! processed by rayon on the current thread pool.
+//!
+//! Cancellation: `cancel` is polled before each sample index of each pixel (each pool of
+//! pixels in lockstep), so a pass stops within one sample's time however many samples it
+//! was asked for. Every pixel then holds a prefix of its samples (indices `0..n`, `n`
+//! counted exactly), so its mean is an unbiased estimate; pixels may differ in `n`.
+//! [`progressive_passes`] gives the pass sizes that keep every pixel's `n` within a factor
+//! of two of the others once the first pass is done.
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
@@ -278,16 +285,16 @@ impl Renderer {
     }
 
     /// Adds samples `[first_sample, first_sample + count)` of every pixel to `film`, in
-    /// parallel on the current rayon pool. Checks `cancel` before each tile and returns
-    /// false when it stopped early; every pixel's sample count stays exact, so a stopped
-    /// render can be saved. Panics if `film` is not of the settings' resolution (a film
-    /// from another renderer).
+    /// parallel on the current rayon pool. Polls `cancel` between samples and returns false
+    /// when it stopped early; every pixel then holds an exact count of a prefix of its
+    /// samples (see the module docs), so a stopped render can be saved. Panics if `film`
+    /// is not of the settings' resolution (a film from another renderer).
     pub fn render_pass(&self, film: &mut Film, first_sample: u32, count: u32, cancel: &AtomicBool) -> bool {
         self.render_pass_with_progress(film, first_sample, count, cancel, &|_| {})
     }
 
     /// [`Renderer::render_pass`] calling `on_tile(pixels)` after each finished tile (for
-    /// progress bars; called from worker threads).
+    /// progress bars; called from worker threads; not called for a tile cut short).
     pub fn render_pass_with_progress(
         &self,
         film: &mut Film,
@@ -308,24 +315,32 @@ impl Renderer {
         let end = first_sample.saturating_add(count);
         let stopped = AtomicBool::new(false);
         film.pixels_mut().par_chunks_mut(width * TILE_ROWS).enumerate().for_each(|(tile, pixels)| {
-            if cancel.load(Ordering::Relaxed) {
+            if !self.render_tile(tile * TILE_ROWS, pixels, first_sample, end, cancel) {
                 stopped.store(true, Ordering::Relaxed);
                 return;
             }
-            self.render_tile(tile * TILE_ROWS, pixels, first_sample, end);
             on_tile(pixels.len());
         });
         !stopped.load(Ordering::Relaxed)
     }
 
-    /// Renders samples `[first, end)` of the pixels of the band starting at row `y0`.
-    fn render_tile(&self, y0: usize, pixels: &mut [FilmPixel], first: u32, end: u32) {
+    /// Renders samples `[first, end)` of the pixels of the band starting at row `y0`;
+    /// false when `cancel` stopped it (each pixel keeps the samples it has added).
+    fn render_tile(
+        &self,
+        y0: usize,
+        pixels: &mut [FilmPixel],
+        first: u32,
+        end: u32,
+        cancel: &AtomicBool,
+    ) -> bool {
         if self.integrator == IntegratorKind::Path {
             let mut stats = LaneStats::default();
+            let tile = TileJob { y0, first, end, cancel };
             match self.trace_mode {
-                TraceMode::Lockstep => return self.render_tile_lockstep(y0, pixels, first, end, &mut stats),
+                TraceMode::Lockstep => return self.render_tile_lockstep(&tile, pixels, &mut stats),
                 TraceMode::LockstepPortable => {
-                    return self.render_tile_lockstep_portable(y0, pixels, first, end, &mut stats)
+                    return self.render_tile_lockstep_portable(&tile, pixels, &mut stats)
                 }
                 TraceMode::Scalar => {}
             }
@@ -338,6 +353,10 @@ impl Renderer {
             let key = Sampler::pixel_key(x, y, self.settings.seed);
             let mut acc = *px;
             for index in first..end {
+                if cancel.load(Ordering::Relaxed) {
+                    *px = acc;
+                    return false;
+                }
                 let s = self.trace_sample_with(x, y, Sampler::from_pixel_key(key, index));
                 if let Some(surface) = s.surface {
                     acc.surface = surface;
@@ -346,23 +365,17 @@ impl Renderer {
             }
             *px = acc;
         }
+        true
     }
 
     /// [`Renderer::render_tile`] in lockstep, with the best lane code the CPU runs.
-    fn render_tile_lockstep(
-        &self,
-        y0: usize,
-        pixels: &mut [FilmPixel],
-        first: u32,
-        end: u32,
-        stats: &mut LaneStats,
-    ) {
+    fn render_tile_lockstep(&self, tile: &TileJob, pixels: &mut [FilmPixel], stats: &mut LaneStats) -> bool {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.render_tile_lockstep_avx2(y0, pixels, first, end, stats) };
+            return unsafe { self.render_tile_lockstep_avx2(tile, pixels, stats) };
         }
-        self.render_tile_lockstep_portable(y0, pixels, first, end, stats)
+        self.render_tile_lockstep_portable(tile, pixels, stats)
     }
 
     /// The lane code compiled for AVX2 + FMA (the same source; only instruction selection
@@ -371,39 +384,34 @@ impl Renderer {
     #[target_feature(enable = "avx2,fma")]
     unsafe fn render_tile_lockstep_avx2(
         &self,
-        y0: usize,
+        tile: &TileJob,
         pixels: &mut [FilmPixel],
-        first: u32,
-        end: u32,
         stats: &mut LaneStats,
-    ) {
-        self.lockstep_tile::<true>(y0, pixels, first, end, stats)
+    ) -> bool {
+        self.lockstep_tile::<true>(tile, pixels, stats)
     }
 
     /// The portable lane code.
     fn render_tile_lockstep_portable(
         &self,
-        y0: usize,
+        tile: &TileJob,
         pixels: &mut [FilmPixel],
-        first: u32,
-        end: u32,
         stats: &mut LaneStats,
-    ) {
-        self.lockstep_tile::<false>(y0, pixels, first, end, stats)
+    ) -> bool {
+        self.lockstep_tile::<false>(tile, pixels, stats)
     }
 
     /// Pools of [`POOL`] adjacent pixels of each row, one sample index at a time; each
     /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
-    /// the same bit for bit.
+    /// the same bit for bit. False when `tile.cancel` stopped it.
     #[inline(always)]
     fn lockstep_tile<const AVX2: bool>(
         &self,
-        y0: usize,
+        tile: &TileJob,
         pixels: &mut [FilmPixel],
-        first: u32,
-        end: u32,
         stats: &mut LaneStats,
-    ) {
+    ) -> bool {
+        let TileJob { y0, first, end, cancel } = *tile;
         let width = self.settings.width as usize;
         let lc = LockstepContext {
             ctx: self.context(),
@@ -421,6 +429,11 @@ impl Renderer {
                 let keys: [u32; POOL] =
                     std::array::from_fn(|j| Sampler::pixel_key(x0 + j as u32, y, self.settings.seed));
                 for index in first..end {
+                    // One relaxed load per pool of paths: negligible, and bounds how long a
+                    // Ctrl-C waits whatever the pass size.
+                    if cancel.load(Ordering::Relaxed) {
+                        return false;
+                    }
                     lockstep::trace_pool::<AVX2>(&lc, x0, y, &keys, n, index, &mut pool, stats, &mut out);
                     for (px, s) in chunk.iter_mut().zip(out.iter()) {
                         if let Some(surface) = s.surface {
@@ -431,6 +444,7 @@ impl Renderer {
                 }
             }
         }
+        true
     }
 
     /// Lane utilisation of the lockstep tracer for samples `[first, first + count)` of every
@@ -439,14 +453,11 @@ impl Renderer {
         let mut film = self.new_film();
         let mut stats = LaneStats::default();
         let width = self.settings.width as usize;
+        let never = AtomicBool::new(false);
         for (tile, pixels) in film.pixels_mut().chunks_mut(width * TILE_ROWS).enumerate() {
-            self.render_tile_lockstep(
-                tile * TILE_ROWS,
-                pixels,
-                first,
-                first.saturating_add(count),
-                &mut stats,
-            );
+            let job =
+                TileJob { y0: tile * TILE_ROWS, first, end: first.saturating_add(count), cancel: &never };
+            self.render_tile_lockstep(&job, pixels, &mut stats);
         }
         stats
     }
@@ -457,6 +468,35 @@ impl Renderer {
         self.render_pass(&mut film, 0, self.settings.spp, cancel);
         film
     }
+}
+
+/// One tile's work: samples `[first, end)` of the band starting at row `y0`, stopped
+/// when `cancel` is set.
+#[derive(Clone, Copy)]
+struct TileJob<'a> {
+    y0: usize,
+    first: u32,
+    end: u32,
+    cancel: &'a AtomicBool,
+}
+
+/// The passes of a progressive render of `spp` samples per pixel, as `(first_sample,
+/// count)`: 1, 1, 2, 4, 8, ... samples, each pass at most the samples already done and at
+/// most `max_pass` (at least 1). The first pass (1 sample) ends quickly, so a render cut
+/// short after it has every pixel sampled, and a pass cut short leaves each pixel with
+/// between `n` and `2n` samples.
+pub fn progressive_passes(spp: u32, max_pass: u32) -> impl Iterator<Item = (u32, u32)> {
+    let max_pass = max_pass.max(1);
+    let mut first = 0u32;
+    std::iter::from_fn(move || {
+        if first >= spp {
+            return None;
+        }
+        let count = first.clamp(1, max_pass).min(spp - first);
+        let pass = (first, count);
+        first += count;
+        Some(pass)
+    })
 }
 
 /// Timing of [`render_bench`].
@@ -486,5 +526,72 @@ pub fn render_bench(renderer: &Renderer, threads: usize) -> BenchResult {
         seconds,
         samples_per_second: samples as f64 / seconds.max(1e-9),
         mean_color: [mean[0], mean[1], mean[2]],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{mpsc, Arc};
+    use std::time::Duration;
+
+    #[test]
+    fn progressive_passes_cover_every_sample_once_starting_with_one() {
+        for (spp, max) in [(1, 1), (4, 1), (64, 4), (1000, 64), (7, 100), (u32::MAX, u32::MAX / 16), (5, 0)] {
+            let passes: Vec<_> = progressive_passes(spp, max).collect();
+            assert_eq!(passes[0], (0, 1), "spp {spp}");
+            let mut next = 0u64;
+            for &(first, count) in &passes {
+                assert_eq!(first as u64, next, "contiguous, spp {spp}");
+                assert!(count >= 1 && count <= max.max(1) && count <= first.max(1), "{first} {count}");
+                next += count as u64;
+            }
+            assert_eq!(next, spp as u64);
+        }
+        assert_eq!(progressive_passes(0, 4).count(), 0);
+        let sizes: Vec<u32> = progressive_passes(40, 8).map(|p| p.1).collect();
+        assert_eq!(sizes, [1, 1, 2, 4, 8, 8, 8, 8]);
+    }
+
+    /// A pass of (practically) endless samples cancelled from another thread returns soon
+    /// after (issue 17: one long tile ignored Ctrl-C), and every pixel holds exactly its
+    /// samples `0..n` for its own `n`, bit for bit, so its mean is unbiased.
+    #[test]
+    fn a_huge_pass_stops_soon_after_cancel_and_keeps_exact_sample_prefixes() {
+        for mode in [TraceMode::Lockstep, TraceMode::Scalar] {
+            let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
+            let settings = RenderSettings { width: 16, height: 8, spp: 1, max_depth: 4, seed: 3 };
+            let r = Arc::new(Renderer::new(scene, settings).unwrap().with_trace_mode(mode));
+            let cancel = Arc::new(AtomicBool::new(false));
+            let (tx, rx) = mpsc::channel();
+            let (r2, cancel2) = (r.clone(), cancel.clone());
+            // Detached: if the pass ignored `cancel`, the test fails at the timeout below
+            // instead of hanging.
+            std::thread::spawn(move || {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+                let mut film = r2.new_film();
+                let finished = pool.install(|| r2.render_pass(&mut film, 0, u32::MAX, &cancel2));
+                let _ = tx.send((finished, film));
+            });
+            std::thread::sleep(Duration::from_millis(100));
+            cancel.store(true, Ordering::Relaxed);
+            let (finished, film) = rx
+                .recv_timeout(Duration::from_secs(20))
+                .expect("{mode:?}: the pass stops within 20 s of cancel");
+            assert!(!finished, "{mode:?}");
+            assert!(film.max_samples() > 0, "{mode:?}: no sample in 100 ms");
+            for (i, px) in film.pixels().iter().enumerate().filter(|(_, p)| p.traced() > 0) {
+                let (x, y) = ((i % 16) as u32, (i / 16) as u32);
+                let mut want = FilmPixel::default();
+                for index in 0..px.traced() {
+                    let s = r.trace_sample(x, y, index);
+                    if let Some(surface) = s.surface {
+                        want.surface = surface;
+                    }
+                    want.add(&s.radiance.to_pixel_sample());
+                }
+                assert_eq!(*px, want, "{mode:?}: pixel ({x}, {y}) with {} samples", px.traced());
+            }
+        }
     }
 }

@@ -1,9 +1,12 @@
 //! `filtrace render`: load a scene, path trace it progressively in passes, write one
 //! multi-layer EXR (colour + AOVs) and a tonemapped PNG beside it, print a summary.
 //!
-//! Ctrl-C stops the passes at the next tile; what was rendered is written (every pixel's
-//! sample count is exact, so the image is an unbiased mean of fewer samples) and the
-//! command exits with code 130. A second Ctrl-C exits at once.
+//! Ctrl-C ([`CtrlC`]) during loading or the BVH build exits at once, writing nothing.
+//! During the passes it stops them within a sample's time; if every pixel has a sample,
+//! what was rendered is written (each pixel the mean of its own samples `0..n`, an unbiased
+//! estimate; the counts are the `samples` layer, and the header says how many were asked
+//! for, the fewest done and that Ctrl-C cut it short), else nothing. Either way the command
+//! exits with code 130. A second Ctrl-C exits at once.
 //!
 //! The filtered pipeline and adaptive sampling (`--adaptive`, and `--filter` once
 //! `render_filtered::FilterArgs` has it) are run by `render_filtered`; this module
@@ -14,13 +17,14 @@ use anyhow::Context;
 use filtrace_core::Image;
 use filtrace_io::{ExrImage, TonemapParams};
 use filtrace_render::film::Aovs;
-use filtrace_render::{RenderSettings, Renderer};
+use filtrace_render::renderer::progressive_passes;
+use filtrace_render::{Film, RenderSettings, Renderer};
 use serde::Serialize;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Largest accepted image side (same as the renderer's limit).
 pub const MAX_SIDE: u32 = filtrace_render::renderer::MAX_SIDE;
@@ -53,7 +57,8 @@ pub struct CommonArgs {
     /// Print one JSON object instead of the human summary.
     #[arg(long)]
     pub json: bool,
-    /// Samples per pixel added per progressive pass (default: spp/16, at least 1).
+    /// Most samples per pixel added by one progressive pass (default: spp/16, at least 1);
+    /// passes start at 1 sample and double up to it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub passes_spp: Option<u32>,
     /// PNG exposure in stops (a finite number).
@@ -209,7 +214,7 @@ impl CommonArgs {
         TonemapParams { exposure: self.exposure, ..base }
     }
 
-    /// Samples per pixel per pass.
+    /// Most samples per pixel per pass.
     pub fn pass_spp(&self) -> u32 {
         self.passes_spp.unwrap_or((self.spp / 16).max(1)).min(self.spp.max(1))
     }
@@ -228,18 +233,72 @@ impl std::fmt::Display for Interrupted {
 
 impl std::error::Error for Interrupted {}
 
-/// A cancel flag that Ctrl-C sets; a second Ctrl-C exits the process at once (130).
-pub fn install_ctrlc() -> Arc<AtomicBool> {
-    let cancel = Arc::new(AtomicBool::new(false));
-    let flag = cancel.clone();
-    // Fails only if a handler is already installed (then Ctrl-C keeps its default).
-    let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
+/// Ctrl-C of the rendering commands. Until [`CtrlC::arm`] there is nothing to keep, and
+/// loading and the BVH build cannot stop midway: Ctrl-C exits at once (code 130) and
+/// writes nothing. Once armed, Ctrl-C sets [`CtrlC::flag`], which the render polls; the
+/// command then writes what is complete and exits with 130. A second Ctrl-C exits at once.
+pub struct CtrlC {
+    flag: Arc<AtomicBool>,
+    armed: Arc<AtomicBool>,
+}
+
+impl CtrlC {
+    /// Installs the handler (if one is installed already, as in unit tests running several
+    /// commands, Ctrl-C keeps that one and this flag is never set).
+    pub fn install() -> Self {
+        let (flag, armed) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+        let (f, a) = (flag.clone(), armed.clone());
+        let _ = ctrlc::set_handler(move || {
+            if f.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            if !a.load(Ordering::SeqCst) {
+                eprintln!("\nCtrl-C: stopped before any sample was taken; nothing written");
+                std::process::exit(130);
+            }
+            eprintln!("\nCtrl-C: stopping and writing what is complete (Ctrl-C again to abort)");
+        });
+        CtrlC { flag, armed }
+    }
+
+    /// The render starts: from now on Ctrl-C sets the flag instead of exiting.
+    pub fn arm(&self) {
+        self.armed.store(true, Ordering::SeqCst);
+    }
+
+    pub fn flag(&self) -> &Arc<AtomicBool> {
+        &self.flag
+    }
+
+    pub fn is_set(&self) -> bool {
+        self.flag.load(Ordering::SeqCst)
+    }
+}
+
+/// Test hook for `tests/cancel.rs`: when the environment has `FILTRACE_TEST_PAUSE`, each
+/// stage of a render prints `filtrace-test: STAGE` on stderr, and the stage the variable
+/// names then waits up to 10 s (less if `cancel` is set), so that a test can send SIGINT at
+/// a known point. Stages: `loaded`, `built`, `rendering`, and `pass N` after each pass of
+/// the plain render (N samples per pixel done).
+pub fn test_hook(stage: &str, cancel: &AtomicBool) {
+    let Some(pause) = std::env::var_os("FILTRACE_TEST_PAUSE") else { return };
+    eprintln!("filtrace-test: {stage}");
+    if pause == stage {
+        let until = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < until && !cancel.load(Ordering::SeqCst) {
+            std::thread::sleep(Duration::from_millis(10));
         }
-        eprintln!("\nCtrl-C: stopping after the current tiles and writing what was rendered (Ctrl-C again to abort)");
-    });
-    cancel
+    }
+}
+
+/// The EXR header attributes of a render: samples per pixel asked for, done (the fewest of
+/// any pixel) and whether Ctrl-C stopped it.
+pub fn render_attributes(spp_requested: u32, spp_done: u32, cancelled: bool) -> Vec<(&'static str, String)> {
+    vec![
+        ("filtrace:spp_requested", spp_requested.to_string()),
+        ("filtrace:spp_done", spp_done.to_string()),
+        ("filtrace:cancelled", cancelled.to_string()),
+    ]
 }
 
 /// A progress bar on stderr when it is a terminal, hidden otherwise.
@@ -267,13 +326,14 @@ pub struct Written {
 }
 
 /// Writes the multi-layer EXR (`R,G,B`, `direct`, `indirect`, `albedo`, `normal`,
-/// `position`, `depth`, `variance`, then `extra` layers as `(name, channel names, image)`)
-/// and the tonemapped PNG of `png_image` (the colour if `None`) beside it, creating the
-/// folder.
+/// `position`, `depth`, `variance`, then `extra` layers as `(name, channel names, image)`;
+/// header text `attributes`) and the tonemapped PNG of `png_image` (the colour if `None`)
+/// beside it, creating the folder.
 pub fn write_outputs(
     exr_path: &Path,
     aovs: &Aovs,
     extra: &[(&str, &[&str], &Image)],
+    attributes: &[(&str, String)],
     png_image: Option<&Image>,
     tonemap: &TonemapParams,
 ) -> anyhow::Result<Written> {
@@ -296,6 +356,9 @@ pub fn write_outputs(
     for (name, channels, image) in layers.iter().chain(extra.iter()) {
         exr.insert(name, channels, image)?;
     }
+    for (name, value) in attributes {
+        exr.set_attribute(name, value)?;
+    }
     filtrace_io::write_exr(exr_path, &exr)?;
     let png = exr_path.with_extension("png");
     let report = filtrace_io::write_png(&png, png_image.unwrap_or(&aovs.color), tonemap)?;
@@ -312,6 +375,8 @@ struct Summary {
     spp: u32,
     /// Smallest per-pixel sample count reached (less than `spp` when cancelled).
     spp_done: u32,
+    /// Largest per-pixel sample count (between `spp_done` and twice it when cancelled).
+    spp_max: u32,
     max_depth: i32,
     seed: u64,
     threads: usize,
@@ -343,12 +408,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The plain path-traced render (no filter, uniform sampling).
 pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
-    // First, so that a Ctrl-C during loading also stops cleanly.
-    let cancel = install_ctrlc();
+    // First: until the render starts, Ctrl-C exits at once and writes nothing.
+    let ctrlc = CtrlC::install();
 
     let t0 = Instant::now();
     let scene = c.load_scene().with_context(|| format!("cannot load scene '{}'", c.scene))?;
     let load_s = t0.elapsed().as_secs_f64();
+    test_hook("loaded", ctrlc.flag());
     let out = c.prepare_output()?;
     let load_warnings = scene.stats.warnings.clone();
     let degenerate = scene.stats.degenerate_triangles_skipped;
@@ -365,25 +431,25 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     if let Some(t) = c.trace {
         renderer = renderer.with_trace_mode(t.mode());
     }
+    test_hook("built", ctrlc.flag());
 
-    let pixels = settings.width as u64 * settings.height as u64;
-    let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {}", c.scene_name()));
-    let mut film = renderer.new_film();
-    let step = c.pass_spp();
-    let t1 = Instant::now();
-    let mut first = 0u32;
-    while first < settings.spp && !cancel.load(Ordering::SeqCst) {
-        let count = step.min(settings.spp - first);
-        let on_tile = |n: usize| bar.inc(n as u64 * count as u64);
-        pool.install(|| renderer.render_pass_with_progress(&mut film, first, count, &cancel, &on_tile));
-        first += count;
+    ctrlc.arm();
+    test_hook("rendering", ctrlc.flag());
+    let (film, render_s) = render_passes(&renderer, &pool, c, ctrlc.flag());
+    let cancelled = ctrlc.is_set();
+    if cancelled && film.pixels_without_samples() > 0 {
+        eprintln!(
+            "cancelled before every pixel had a sample: nothing written ({} left as it was)",
+            out.display()
+        );
+        return Err(Interrupted.into());
     }
-    let render_s = t1.elapsed().as_secs_f64();
-    bar.finish_and_clear();
-    let cancelled = cancel.load(Ordering::SeqCst);
 
     let aovs = film.aovs();
-    let written = write_outputs(&out, &aovs, &[], None, &c.tonemap())?;
+    let counts = film.sample_counts();
+    let attributes = render_attributes(settings.spp, film.min_samples(), cancelled);
+    let written =
+        write_outputs(&out, &aovs, &[("samples", &["Y"], &counts)], &attributes, None, &c.tonemap())?;
     let samples = film.total_samples();
     let mean = aovs.color.mean();
     let summary = Summary {
@@ -393,6 +459,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
         height: settings.height,
         spp: settings.spp,
         spp_done: film.min_samples(),
+        spp_max: film.max_samples(),
         max_depth: settings.max_depth,
         seed: settings.seed,
         threads,
@@ -417,16 +484,42 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     }
     if cancelled {
         eprintln!(
-            "cancelled: wrote what was rendered ({} to {} of {} spp per pixel, {:.2} on average) to {}",
+            "cancelled: wrote what was rendered ({} to {} of {} spp per pixel, {:.2} on average; per pixel in the 'samples' layer) to {}",
             summary.spp_done,
-            film.pixels().iter().map(|p| p.samples).max().unwrap_or(0),
+            summary.spp_max,
             settings.spp,
-            samples as f64 / pixels as f64,
+            samples as f64 / (settings.width as f64 * settings.height as f64),
             written.exr.display()
         );
         return Err(Interrupted.into());
     }
     Ok(())
+}
+
+/// The progressive passes ([`progressive_passes`]) of `c` until done or `cancel`; returns
+/// the film and the seconds spent.
+fn render_passes(
+    renderer: &Renderer,
+    pool: &rayon::ThreadPool,
+    c: &CommonArgs,
+    cancel: &AtomicBool,
+) -> (Film, f64) {
+    let settings = renderer.settings();
+    let pixels = settings.width as u64 * settings.height as u64;
+    let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {}", c.scene_name()));
+    let mut film = renderer.new_film();
+    let start = Instant::now();
+    for (first, count) in progressive_passes(settings.spp, c.pass_spp()) {
+        let on_tile = |n: usize| bar.inc(n as u64 * count as u64);
+        if cancel.load(Ordering::SeqCst)
+            || !pool.install(|| renderer.render_pass_with_progress(&mut film, first, count, cancel, &on_tile))
+        {
+            break;
+        }
+        test_hook(&format!("pass {}", first + count), cancel);
+    }
+    bar.finish_and_clear();
+    (film, start.elapsed().as_secs_f64())
 }
 
 fn print_summary(s: &Summary, png_nonfinite: usize) {

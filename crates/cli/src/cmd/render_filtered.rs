@@ -7,16 +7,24 @@
 //! map by the geometry-aware lookup. It writes one EXR with the final image and the `noisy`,
 //! `direct`, `indirect`, `filtered` (indirect) layers plus the guide G-buffer, a PNG beside
 //! it, and prints the milliseconds of each stage.
+//!
+//! Ctrl-C (see `render::CtrlC`) during loading, the build or the guide rays writes nothing;
+//! during the further samples, the frame is completed from the samples done (exactly the
+//! frame of fewer samples per pixel, `filtrace_pipeline::pipeline`) and written, its header
+//! saying how many. Either way the command exits with code 130.
 
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
-use filtrace_pipeline::{FilterChoice, FilteredRenderer, Frame, PipelineSettings, RenderSource};
+use filtrace_pipeline::adaptive::AdaptiveFrameError;
+use filtrace_pipeline::{
+    FilterChoice, FilteredRenderer, Frame, PipelineError, PipelineSettings, RenderSource,
+};
 use filtrace_render::Renderer;
 use serde::Serialize;
 
-use super::render::CommonArgs;
+use super::render::{render_attributes, test_hook, CommonArgs, CtrlC, Interrupted};
 
 /// Reconstruction filter options of `filtrace render`.
 #[derive(clap::Args, Debug, Clone)]
@@ -94,6 +102,8 @@ struct Summary<'a> {
     width: u32,
     height: u32,
     spp: u32,
+    /// Eye samples per pixel in the frame (less than `spp` when cancelled).
+    spp_done: u32,
     indirect_paths: u32,
     max_depth: i32,
     seed: u64,
@@ -107,6 +117,7 @@ struct Summary<'a> {
     adaptive_plan_ms: Option<f64>,
     mean_rgb: [f64; 3],
     output: &'a Path,
+    cancelled: bool,
 }
 
 /// The filtered branch of `filtrace render`.
@@ -126,46 +137,59 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let choice = filter.choice();
     choice.denoise_filter().map_err(|e| anyhow::anyhow!("{e}"))?;
+    // First: until the frame starts, Ctrl-C exits at once and writes nothing.
+    let ctrlc = CtrlC::install();
     let t0 = Instant::now();
     let scene = common.load_scene().with_context(|| format!("cannot load scene '{}'", common.scene))?;
     let load_s = t0.elapsed().as_secs_f64();
     if !common.json {
         scene.stats.warnings.iter().for_each(|w| eprintln!("warning: {w}"));
     }
+    test_hook("loaded", ctrlc.flag());
     let pool = common.thread_pool()?;
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
     let build_s = pipeline.source().renderer().build_seconds();
+    test_hook("built", ctrlc.flag());
+    pipeline.set_cancel(Some(ctrlc.flag().clone()));
+    ctrlc.arm();
+    test_hook("rendering", ctrlc.flag());
+    let out = common.output_path();
     // Adaptive sampling (Bauszat et al. 2011b, `filtrace_pipeline::adaptive`): a G-buffer
     // pre-pass of the guide rays, the importance map from its normals and positions, the
     // apportioned per-pixel indirect path counts, then the frame with those counts.
     let mut plan_ms = None;
     let mut adaptive_layers = None;
     let frame = match adaptive.params() {
-        None => pool.install(|| pipeline.render_frame().cloned()).map_err(|e| anyhow::anyhow!("{e}"))?,
+        None => pool.install(|| pipeline.render_frame().cloned()).map_err(|e| frame_error(e, &out))?,
         Some(params) => {
             let (frame, plan) = pool
                 .install(|| pipeline.render_frame_adaptive(&params).map(|(f, p)| (f.clone(), p)))
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+                .map_err(|e| match e {
+                    AdaptiveFrameError::Pipeline(e) => frame_error(e, &out),
+                    e => anyhow::anyhow!("{e}"),
+                })?;
             plan_ms = Some(plan.prepass_ms + plan.plan_ms);
             adaptive_layers = Some((plan.importance, plan.counts.to_image()));
             frame
         }
     };
-    let out = common.output_path();
     let extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
         Some((importance, counts)) => {
             vec![("importance", &["Y"], importance), ("indirect_paths", &["Y"], counts)]
         }
         None => vec![],
     };
-    write_frame(&out, &frame, &extra, &common.tonemap())?;
+    let cancelled = ctrlc.is_set();
+    let attributes = render_attributes(settings.spp, frame.spp_done, cancelled);
+    write_frame(&out, &frame, &extra, &attributes, &common.tonemap())?;
     let m = frame.images.color.mean();
     let summary = Summary {
         scene: &common.scene,
         width: settings.width,
         height: settings.height,
         spp: settings.spp,
+        spp_done: frame.spp_done,
         indirect_paths: settings.indirect_paths,
         max_depth: common.max_depth,
         seed: settings.seed,
@@ -178,6 +202,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         adaptive_plan_ms: plan_ms,
         mean_rgb: [m[0], m[1], m[2]],
         output: &out,
+        cancelled,
     };
     if common.json {
         println!("{}", serde_json::to_string(&summary)?);
@@ -224,17 +249,40 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         }
         println!("  wrote {} and {}", out.display(), out.with_extension("png").display());
     }
+    if cancelled {
+        eprintln!(
+            "cancelled: wrote the frame of {} of {} spp per pixel to {}",
+            frame.spp_done,
+            settings.spp,
+            out.display()
+        );
+        return Err(Interrupted.into());
+    }
     Ok(())
+}
+
+/// A frame's error; [`Interrupted`] (after a message) when Ctrl-C stopped it before there
+/// was a frame.
+fn frame_error(e: PipelineError, out: &Path) -> anyhow::Error {
+    if e == PipelineError::Cancelled {
+        eprintln!(
+            "cancelled before the guide rays were done: nothing written ({} left as it was)",
+            out.display()
+        );
+        return Interrupted.into();
+    }
+    anyhow::anyhow!("{e}")
 }
 
 /// One EXR with every layer of the frame (`R,G,B` final, `noisy`, `direct`, `indirect`,
 /// `filtered` = filtered indirect, `indirect_map`/`filtered_map` = the guide rays' map
 /// before/after the filter, guide `albedo`, `normal`, `position`, `depth`, then `extra`)
-/// and the PNG of the final image beside it.
+/// and the PNG of the final image beside it; header text `attributes`.
 pub fn write_frame(
     exr_path: &Path,
     frame: &Frame,
     extra: &[(&str, &[&str], &filtrace_core::Image)],
+    attributes: &[(&str, String)],
     tonemap: &filtrace_io::TonemapParams,
 ) -> anyhow::Result<()> {
     if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -263,6 +311,9 @@ pub fn write_frame(
     layers.extend_from_slice(extra);
     for (name, channels, image) in layers {
         exr.insert(name, channels, image)?;
+    }
+    for (name, value) in attributes {
+        exr.set_attribute(name, value)?;
     }
     filtrace_io::write_exr(exr_path, &exr)?;
     filtrace_io::write_png(exr_path.with_extension("png"), &im.color, tonemap)?;

@@ -16,6 +16,12 @@
 //!    most similar of its four neighbouring guide rays (§3.2, eqs. 3-5), re-modulated by its
 //!    own albedo; samples are averaged with a box filter.
 //!
+//! Passes 3 and 4 alternate over chunks of at most [`SAMPLE_CHUNK`] further samples, each
+//! chunk's samples added to per-pixel sums in the frame's layers, so that memory is
+//! O(pixels) whatever the spp (a record per sample was 52 bytes per sample: 56 GB at
+//! 512x512 and 4096 spp). The sums see the same additions in the same order for any chunk
+//! size.
+//!
 //! The same lookup on the *unfiltered* map gives the `noisy` layer at no extra tracing cost,
 //! so that `noisy = direct + indirect` and, with [`NoFilter`](crate::NoFilter),
 //! `color == noisy`.
@@ -26,6 +32,8 @@ use filtrace_adaptive::{BatchSchedule, Slot};
 use filtrace_core::rng::{splitmix64, unit_f32};
 use filtrace_core::{Image, Rgb, Vec2};
 use rayon::prelude::*;
+
+use filtrace_render::memory::{try_resize, try_vec, AllocError};
 
 use crate::filter::{GuideLayers, IndirectFilter};
 use crate::lookup::{most_similar_guide, GuideGeometry, HitGeometry};
@@ -38,6 +46,16 @@ pub const DEMODULATION_EPS: f32 = 1e-3;
 /// Largest accepted image side and pixel count (same limits as the renderer).
 pub const MAX_SIDE: u32 = 32768;
 pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Largest accepted spp: further sample `s` of a pixel is sampler index `2^24 + s`
+/// ([`crate::render_source::EYE_SAMPLE_INDEX_BASE`]), which must stay within `u32`.
+pub const MAX_SPP: u32 = 1 << 30;
+
+/// Further samples traced before their lookup (the records kept between passes 3 and 4):
+/// bounds their memory at `SAMPLE_CHUNK * 52` bytes (6.8 MB), whatever the spp and the
+/// resolution. 131,072 samples are milliseconds of tracing per chunk, against two parallel
+/// joins of overhead per chunk.
+pub const SAMPLE_CHUNK: usize = 1 << 17;
 
 /// Settings of the filtered pipeline.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -89,8 +107,7 @@ impl PipelineSettings {
         if self.spp == 0 {
             return Err(PipelineError::ZeroSpp);
         }
-        // The per-sample records of the supersampling pass must fit comfortably.
-        if (self.spp as u64 - 1) * self.width as u64 * self.height as u64 > 1 << 30 {
+        if self.spp > MAX_SPP {
             return Err(PipelineError::TooManySamples(self.spp));
         }
         Ok(())
@@ -116,6 +133,14 @@ pub enum PipelineError {
     Filter(String),
     /// The batch schedule of the indirect paths could not be built.
     Batch(String),
+    /// A frame buffer could not be allocated.
+    OutOfMemory(AllocError),
+}
+
+impl From<AllocError> for PipelineError {
+    fn from(e: AllocError) -> Self {
+        Self::OutOfMemory(e)
+    }
 }
 
 impl std::fmt::Display for PipelineError {
@@ -129,8 +154,9 @@ impl std::fmt::Display for PipelineError {
             }
             Self::ZeroSpp => write!(f, "samples per pixel must be at least 1"),
             Self::TooManySamples(s) => {
-                write!(f, "{s} samples per pixel at this resolution need too much memory")
+                write!(f, "{s} samples per pixel is too many (at most {MAX_SPP})")
             }
+            Self::OutOfMemory(e) => write!(f, "{e}"),
             Self::CountsLength { expected, got } => {
                 write!(f, "per-pixel indirect sample counts: expected {expected} entries, got {got}")
             }
@@ -228,7 +254,7 @@ pub struct Frame {
 
 /// A further eye sample kept between the samples pass and the lookup pass.
 #[derive(Clone, Copy, Debug, Default)]
-struct SampleRecord {
+pub(crate) struct SampleRecord {
     film: Vec2,
     hit: Option<HitGeometry>,
     albedo: Rgb,
@@ -244,8 +270,43 @@ struct Buffers {
     /// The guide rays as traced, before they are stored (only with explicit batches).
     guide_samples: Vec<EyeSample>,
     batch: BatchBuffers,
+    /// The further samples of one chunk, between tracing and lookup.
     samples: Vec<SampleRecord>,
     frame: Frame,
+}
+
+impl Buffers {
+    /// Bytes held (capacities), the frame's layers included.
+    fn bytes(&self) -> u64 {
+        fn cap<T>(v: &Vec<T>) -> u64 {
+            (v.capacity() * std::mem::size_of::<T>()) as u64
+        }
+        let im = &self.frame.images;
+        let g = &im.guide;
+        let images = [
+            &im.color,
+            &im.noisy,
+            &im.direct,
+            &im.indirect,
+            &im.filtered_indirect,
+            &im.filtered_direct,
+            &im.indirect_map,
+            &im.filtered_map,
+            &g.normal,
+            &g.depth,
+            &g.albedo,
+            &g.position,
+            &g.coverage,
+        ];
+        let image_bytes: u64 = images.iter().map(|i| (i.data().len() * 4) as u64).sum();
+        image_bytes
+            + cap(&self.guides.hits)
+            + cap(&self.guide_direct)
+            + cap(&self.guide_samples)
+            + cap(&self.batch.slots)
+            + cap(&self.batch.results)
+            + cap(&self.samples)
+    }
 }
 
 /// Filtered path tracing driven frame by frame (a viewer calls [`render_frame`] in its
@@ -258,13 +319,16 @@ pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
     settings: PipelineSettings,
     /// Slots per batch of indirect paths (§4.3); `None`: one per pixel, as in the paper.
     batch_size: Option<usize>,
+    /// Further samples per chunk of passes 3-4 ([`SAMPLE_CHUNK`]).
+    sample_chunk: usize,
     buf: Buffers,
 }
 
 impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
         check(&source, &settings)?;
-        Ok(Self { source, filter, settings, batch_size: None, buf: Buffers::default() })
+        let buf = Buffers::default();
+        Ok(Self { source, filter, settings, batch_size: None, sample_chunk: SAMPLE_CHUNK, buf })
     }
 
     pub fn settings(&self) -> &PipelineSettings {
@@ -288,6 +352,22 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     }
     pub fn batch_size(&self) -> Option<usize> {
         self.batch_size
+    }
+
+    /// Further samples traced per chunk before their lookup (default [`SAMPLE_CHUNK`]); the
+    /// frame does not depend on it, only memory and overhead (`usize::MAX`: every sample
+    /// of the frame at once, the two-pass frame without chunks).
+    pub fn set_sample_chunk(&mut self, samples: usize) {
+        self.sample_chunk = samples.max(1);
+    }
+    pub fn sample_chunk(&self) -> usize {
+        self.sample_chunk
+    }
+
+    /// Bytes of the pipeline's own buffers and layers now (their capacities; the filter's
+    /// scratch is not included): what [`crate::memory::frame_bytes`] estimates.
+    pub fn buffer_bytes(&self) -> u64 {
+        self.buf.bytes()
     }
 
     pub fn source(&self) -> &S {
@@ -326,11 +406,10 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 return Err(PipelineError::CountsLength { expected: n, got: c.len() });
             }
         }
-        let extra = st.spp as usize - 1;
         let start = Instant::now();
         let source = &self.source;
         let buf = &mut self.buf;
-        resize_images(&mut buf.frame.images, w, h, st.filter_direct);
+        resize_images(&mut buf.frame.images, w, h, st.filter_direct)?;
 
         // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
         let t0 = Instant::now();
@@ -340,8 +419,8 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         };
         // Every entry is written by the pass: resize, no clearing.
         (buf.guides.width, buf.guides.height) = (w, h);
-        buf.guides.hits.resize(n, None);
-        buf.guide_direct.resize(n, Rgb::ZERO);
+        try_resize(&mut buf.guides.hits, n, None, "the guide rays' hits")?;
+        try_resize(&mut buf.guide_direct, n, Rgb::ZERO, "the guide rays' direct light")?;
         match self.batch_size {
             Some(batch) if source.traces_single_paths() => {
                 // Explicit batches (§4.3): trace into per-slot buffers, then store.
@@ -351,7 +430,7 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 };
                 let schedule = BatchSchedule::from_counts(&counts, batch)
                     .map_err(|e| PipelineError::Batch(e.to_string()))?;
-                buf.guide_samples.resize(n, EyeSample::default());
+                try_resize(&mut buf.guide_samples, n, EyeSample::default(), "the guide rays")?;
                 guide_pass_batched(source, &schedule, &mut buf.batch, &mut buf.guide_samples, w, st.seed);
                 let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
                 store_guides(&buf.guide_samples, rows, st.demodulate_albedo);
@@ -375,26 +454,10 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         }
         let mut filter_ms = ms(t1);
 
-        // 3. Further eye samples, jittered in the pixel: first hit and direct light only.
-        let t2 = Instant::now();
-        buf.samples.resize(n * extra, SampleRecord::default());
-        if extra > 0 {
-            buf.samples.par_chunks_mut(w * extra).enumerate().for_each(|(y, row)| {
-                for (k, rec) in row.iter_mut().enumerate() {
-                    let (x, s) = (k / extra, (k % extra) as u32 + 1);
-                    let key = SampleKey { x: x as u32, y: y as u32, sample: s, seed: st.seed };
-                    let film = Vec2::new(x as f32, y as f32) + jitter(key);
-                    let e = source.trace(key, film, 0);
-                    *rec = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
-                }
-            });
-        }
-        let samples_ms = ms(t2);
-
-        // 4. Geometry-aware lookup (eqs. 3-5) and box reconstruction.
-        let t3 = Instant::now();
-        let failures = lookup_and_reconstruct(buf, w, extra, st.demodulate_albedo);
-        let lookup_ms = ms(t3);
+        // 3. Further eye samples, jittered in the pixel: first hit and direct light only;
+        // 4. their geometry-aware lookup (eqs. 3-5) and box reconstruction. A chunk of
+        // samples at a time (memory independent of spp).
+        let (samples_ms, lookup_ms, failures) = supersample(source, buf, &st, self.sample_chunk)?;
 
         // Optional: the direct light filtered too (comparison only).
         if st.filter_direct {
@@ -430,27 +493,33 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) {
-    let fit = |img: &mut Image, c: usize| {
+/// Gives every layer the frame's size (allocated fallibly; each pass writes all of its
+/// layer).
+fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) -> Result<(), AllocError> {
+    let fit = |img: &mut Image, c: usize| -> Result<(), AllocError> {
         if img.width() != w || img.height() != h || img.channels() != c {
-            *img = Image::new(w, h, c);
+            *img = Image::new(0, 0, c); // free the old layer first
+            let data = try_vec(w * h * c, 0.0, &format!("the {w}x{h} frame layers"))?;
+            *img = Image::from_vec(w, h, c, data).expect("w * h * c values");
         }
+        Ok(())
     };
     for img in [&mut im.color, &mut im.noisy, &mut im.direct, &mut im.indirect, &mut im.filtered_indirect] {
-        fit(img, 3);
+        fit(img, 3)?;
     }
-    fit(&mut im.indirect_map, 3);
-    fit(&mut im.filtered_map, 3);
-    fit(&mut im.guide.normal, 3);
-    fit(&mut im.guide.albedo, 3);
-    fit(&mut im.guide.position, 3);
-    fit(&mut im.guide.depth, 1);
-    fit(&mut im.guide.coverage, 1);
+    fit(&mut im.indirect_map, 3)?;
+    fit(&mut im.filtered_map, 3)?;
+    fit(&mut im.guide.normal, 3)?;
+    fit(&mut im.guide.albedo, 3)?;
+    fit(&mut im.guide.position, 3)?;
+    fit(&mut im.guide.depth, 1)?;
+    fit(&mut im.guide.coverage, 1)?;
     if filter_direct {
-        fit(&mut im.filtered_direct, 3);
+        fit(&mut im.filtered_direct, 3)?;
     } else {
         im.filtered_direct = Image::new(0, 0, 3);
     }
+    Ok(())
 }
 
 /// Indirect path counts of the guide rays: one for every pixel, or one per pixel.
@@ -722,57 +791,158 @@ fn jitter(key: SampleKey) -> Vec2 {
     Vec2::new(unit_f32(h), unit_f32(splitmix64(h)))
 }
 
-/// Pass 4: for each pixel, the guide sample and every further sample get direct +
-/// re-modulated indirect from the unfiltered and the filtered map; box average.
-/// Returns the number of samples whose lookup found no guide that hit.
-fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, extra: usize, demod: bool) -> u64 {
-    let Buffers { guides, guide_direct, samples, frame, .. } = buf;
-    let im = &mut frame.images;
+/// Passes 3 and 4 over chunks of at most `chunk` further samples (sample `r` of the frame is
+/// further sample `r % extra + 1` of row-major pixel `r / extra`): trace a chunk into
+/// `buf.samples` ([`trace_samples`]), then add each sample to its pixel's sums
+/// ([`lookup_samples`]). The guide ray's own terms start the sums ([`start_sums`]); the box
+/// mean is taken last ([`finish_sums`]). Every pixel's sums get the same additions in the
+/// same order whatever the chunk size, so a chunk holding all samples is the two-pass frame
+/// bit for bit. Returns the milliseconds of tracing and of lookup, and the lookup failures.
+fn supersample<S: PathSource>(
+    source: &S,
+    buf: &mut Buffers,
+    st: &PipelineSettings,
+    chunk: usize,
+) -> Result<(f64, f64, u64), AllocError> {
+    let (w, demod) = (st.width as usize, st.demodulate_albedo);
+    let extra = st.spp as usize - 1;
+    let total = w * st.height as usize * extra;
+    let chunk = chunk.clamp(1, total.max(1));
+    try_resize(&mut buf.samples, chunk.min(total), SampleRecord::default(), "the further samples")?;
+    let t = Instant::now();
+    start_sums(buf, demod);
+    let (mut samples_ms, mut lookup_ms) = (0.0, ms(t));
+    let mut failures = 0;
+    let mut first = 0;
+    while first < total {
+        let len = chunk.min(total - first);
+        let t = Instant::now();
+        trace_samples(source, &mut buf.samples[..len], first, extra, w, st.seed);
+        samples_ms += ms(t);
+        let t = Instant::now();
+        failures += lookup_samples(buf, first..first + len, extra, demod);
+        lookup_ms += ms(t);
+        first += len;
+    }
+    let t = Instant::now();
+    finish_sums(&mut buf.frame.images, extra);
+    Ok((samples_ms, lookup_ms + ms(t), failures))
+}
+
+/// Pass 3 on samples `first..first + out.len()` of the frame: first hit and direct light of
+/// each further eye ray, jittered in its pixel.
+fn trace_samples<S: PathSource>(
+    source: &S,
+    out: &mut [SampleRecord],
+    first: usize,
+    extra: usize,
+    w: usize,
+    seed: u64,
+) {
+    out.par_iter_mut().enumerate().for_each(|(k, rec)| {
+        let (p, s) = ((first + k) / extra, ((first + k) % extra) as u32 + 1);
+        let key = SampleKey { x: (p % w) as u32, y: (p / w) as u32, sample: s, seed };
+        let film = Vec2::new(key.x as f32, key.y as f32) + jitter(key);
+        let e = source.trace(key, film, 0);
+        *rec = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
+    });
+}
+
+/// Factor that re-modulates a demodulated map entry at a sample of albedo `albedo`.
+#[inline]
+fn remodulation(albedo: Rgb, demod: bool) -> Rgb {
+    if demod {
+        albedo + DEMODULATION_EPS
+    } else {
+        Rgb::ONE
+    }
+}
+
+/// The RGB value of one pixel's 3 values.
+#[inline]
+fn load(layer: &[f32]) -> Rgb {
+    Rgb::new(layer[0], layer[1], layer[2])
+}
+
+/// Starts each pixel's sums with its guide ray: its direct light, and its own map entry
+/// (unfiltered and filtered) re-modulated by its albedo.
+fn start_sums(buf: &mut Buffers, demod: bool) {
+    let im = &mut buf.frame.images;
     let (map, fmap, albedo) = (&im.indirect_map, &im.filtered_map, &im.guide.albedo);
+    let guide_direct = &buf.guide_direct;
+    im.direct
+        .data_mut()
+        .par_chunks_mut(3)
+        .zip(im.indirect.data_mut().par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut().par_chunks_mut(3))
+        .enumerate()
+        .for_each(|(own, ((d, ind), find))| {
+            let m = remodulation(map_rgb(albedo, own), demod);
+            d.copy_from_slice(&guide_direct[own].to_array());
+            ind.copy_from_slice(&(m * map_rgb(map, own)).to_array());
+            find.copy_from_slice(&(m * map_rgb(fmap, own)).to_array());
+        });
+}
+
+/// Pass 4 on samples `range` of the frame (traced into `buf.samples[..range.len()]`): each
+/// sample's direct light, and its indirect light from the unfiltered and the filtered map
+/// at the most similar neighbouring guide ray, added to its pixel's sums in sample order.
+/// Returns the number of samples whose lookup found no guide that hit.
+fn lookup_samples(buf: &mut Buffers, range: std::ops::Range<usize>, extra: usize, demod: bool) -> u64 {
+    let Buffers { guides, samples, frame, .. } = buf;
+    let im = &mut frame.images;
+    let (map, fmap) = (&im.indirect_map, &im.filtered_map);
+    let pixels = range.start / extra..(range.end - 1) / extra + 1;
+    let values = pixels.start * 3..pixels.end * 3;
+    im.direct.data_mut()[values.clone()]
+        .par_chunks_mut(3)
+        .zip(im.indirect.data_mut()[values.clone()].par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut()[values].par_chunks_mut(3))
+        .enumerate()
+        .map(|(i, ((d, ind), find))| {
+            let p = pixels.start + i;
+            let own = range.start.max(p * extra)..range.end.min((p + 1) * extra);
+            let (mut sd, mut si, mut sf) = (load(d), load(ind), load(find));
+            let mut fails = 0u64;
+            for rec in &samples[own.start - range.start..own.end - range.start] {
+                sd += rec.direct;
+                let Some(hit) = &rec.hit else { continue };
+                match most_similar_guide(guides, rec.film, hit) {
+                    Some(g) => {
+                        let m = remodulation(rec.albedo, demod);
+                        si += m * map_rgb(map, g);
+                        sf += m * map_rgb(fmap, g);
+                    }
+                    None => fails += 1,
+                }
+            }
+            d.copy_from_slice(&sd.to_array());
+            ind.copy_from_slice(&si.to_array());
+            find.copy_from_slice(&sf.to_array());
+            fails
+        })
+        .sum()
+}
+
+/// Box reconstruction: the sums of `extra + 1` samples become means; `noisy` and `color`
+/// are direct + unfiltered and direct + filtered indirect.
+fn finish_sums(im: &mut FrameImages, extra: usize) {
     let inv = 1.0 / (extra + 1) as f32;
-    let remod = |albedo: Rgb| if demod { albedo + DEMODULATION_EPS } else { Rgb::ONE };
-    let row = w * 3;
-    let failures = std::sync::atomic::AtomicU64::new(0);
     im.color
         .data_mut()
-        .par_chunks_mut(row)
-        .zip(im.noisy.data_mut().par_chunks_mut(row))
-        .zip(im.direct.data_mut().par_chunks_mut(row))
-        .zip(im.indirect.data_mut().par_chunks_mut(row))
-        .zip(im.filtered_indirect.data_mut().par_chunks_mut(row))
-        .enumerate()
-        .for_each(|(y, ((((color, noisy), direct), indirect), filtered))| {
-            let mut fails = 0u64;
-            for x in 0..w {
-                let own = y * w + x;
-                // The guide ray takes its own map entry.
-                let m = remod(map_rgb(albedo, own));
-                let mut d = guide_direct[own];
-                let mut ind = m * map_rgb(map, own);
-                let mut find = m * map_rgb(fmap, own);
-                for rec in &samples[own * extra..(own + 1) * extra] {
-                    d += rec.direct;
-                    let Some(hit) = &rec.hit else { continue };
-                    match most_similar_guide(guides, rec.film, hit) {
-                        Some(i) => {
-                            let m = remod(rec.albedo);
-                            ind += m * map_rgb(map, i);
-                            find += m * map_rgb(fmap, i);
-                        }
-                        None => fails += 1,
-                    }
-                }
-                let (d, ind, find) = (d * inv, ind * inv, find * inv);
-                let px = x * 3..x * 3 + 3;
-                direct[px.clone()].copy_from_slice(&d.to_array());
-                indirect[px.clone()].copy_from_slice(&ind.to_array());
-                filtered[px.clone()].copy_from_slice(&find.to_array());
-                noisy[px.clone()].copy_from_slice(&(d + ind).to_array());
-                color[px].copy_from_slice(&(d + find).to_array());
-            }
-            failures.fetch_add(fails, std::sync::atomic::Ordering::Relaxed);
+        .par_chunks_mut(3)
+        .zip(im.noisy.data_mut().par_chunks_mut(3))
+        .zip(im.direct.data_mut().par_chunks_mut(3))
+        .zip(im.indirect.data_mut().par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut().par_chunks_mut(3))
+        .for_each(|((((color, noisy), direct), indirect), filtered)| {
+            let (d, ind, find) = (load(direct) * inv, load(indirect) * inv, load(filtered) * inv);
+            direct.copy_from_slice(&d.to_array());
+            indirect.copy_from_slice(&ind.to_array());
+            filtered.copy_from_slice(&find.to_array());
+            noisy.copy_from_slice(&(d + ind).to_array());
+            color.copy_from_slice(&(d + find).to_array());
         });
-    failures.into_inner()
 }
 
 #[inline]

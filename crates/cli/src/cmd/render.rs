@@ -22,6 +22,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// Samples per pixel without `--spp` (with `--adaptive`, the budget is used instead).
+pub const DEFAULT_SPP: u32 = 64;
+
 /// Largest accepted image side (same as the renderer's limit).
 pub const MAX_SIDE: u32 = filtrace_render::renderer::MAX_SIDE;
 
@@ -31,9 +34,9 @@ pub struct CommonArgs {
     /// Built-in scene name (`cornell`) or a scene file (.toml, .obj, .gltf/.glb, .ply).
     #[arg(default_value = "cornell")]
     pub scene: String,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 64)]
-    pub spp: u32,
+    /// Samples per pixel [default: 64; with --adaptive: the --budget-spp].
+    #[arg(long, value_name = "N")]
+    pub spp: Option<u32>,
     /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
     #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
     pub res: Resolution,
@@ -130,12 +133,17 @@ impl CommonArgs {
         let s = RenderSettings {
             width: self.res.width,
             height: self.res.height,
-            spp: self.spp,
+            spp: self.spp(),
             max_depth: self.max_depth,
             seed: self.seed,
         };
         s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(s)
+    }
+
+    /// `--spp`, or [`DEFAULT_SPP`].
+    pub fn spp(&self) -> u32 {
+        self.spp.unwrap_or(DEFAULT_SPP)
     }
 
     /// A short name for the scene: the built-in name or the file stem.
@@ -197,7 +205,7 @@ impl CommonArgs {
 
     /// Samples per pixel per pass.
     pub fn pass_spp(&self) -> u32 {
-        self.passes_spp.unwrap_or((self.spp / 16).max(1)).min(self.spp.max(1))
+        self.passes_spp.unwrap_or((self.spp() / 16).max(1)).min(self.spp().max(1))
     }
 }
 
@@ -329,6 +337,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The plain path-traced render (no filter, uniform sampling).
 pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
+    super::render_filtered::check_memory(filtrace_render::memory::plain_render(
+        settings.width,
+        settings.height,
+    ))?;
     // First, so that a Ctrl-C during loading also stops cleanly.
     let cancel = install_ctrlc();
 
@@ -355,7 +367,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
 
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {}", c.scene_name()));
-    let mut film = renderer.new_film();
+    let mut film = filtrace_render::Film::try_new(settings.width as usize, settings.height as usize)?;
     let step = c.pass_spp();
     let t1 = Instant::now();
     let mut first = 0u32;
@@ -369,7 +381,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let cancelled = cancel.load(Ordering::SeqCst);
 
-    let aovs = film.aovs();
+    let aovs = film.try_aovs()?;
     let written = write_outputs(&out, &aovs, &[], None, &c.tonemap())?;
     let samples = film.total_samples();
     let mean = aovs.color.mean();

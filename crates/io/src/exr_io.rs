@@ -268,7 +268,8 @@ pub fn write_exr(path: impl AsRef<Path>, image: &ExrImage) -> Result<(), IoError
     exr.write().to_buffered(&mut bytes).map_err(|e| exr_error(path, e))?;
     let mut bytes = bytes.into_inner();
     if image.attributes.len() > 1 {
-        sort_header_attributes(&mut bytes).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
+        sort_header_attributes(&mut bytes)
+            .map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
     }
     crate::write_atomic(path, |w| w.write_all(&bytes))
 }

@@ -9,6 +9,7 @@
 //!
 //! - [`pipeline`]: the frame, pass by pass ([`FilteredRenderer::render_frame`]).
 //! - [`lookup`]: the geometry-aware lookup (eqs. 3-5).
+//! - [`memory`]: the bytes a frame will need, known before it is rendered.
 //! - [`source`]: what the pipeline asks of a path tracer ([`PathSource`]).
 //! - [`filter`]: the filter slot ([`IndirectFilter`]); [`denoise_filter`] puts
 //!   `filtrace-denoise`'s filters in it.
@@ -36,6 +37,7 @@ pub mod adaptive;
 pub mod denoise_filter;
 pub mod filter;
 pub mod lookup;
+pub mod memory;
 pub mod pipeline;
 pub mod render_source;
 pub mod source;
@@ -43,6 +45,9 @@ pub mod source;
 pub use denoise_filter::{filter_by_name, DenoiseFilter, FilterChoice};
 pub use filter::{GuideLayers, IndirectFilter, NoFilter};
 pub use lookup::{most_similar_guide, neighbour_guides, GuideGeometry, HitGeometry};
-pub use pipeline::{FilteredRenderer, Frame, FrameImages, FrameTimings, PipelineError, PipelineSettings};
+pub use pipeline::{
+    FilteredRenderer, Frame, FrameImages, FrameTimings, PipelineError, PipelineSettings, MAX_SPP,
+    SAMPLE_CHUNK,
+};
 pub use render_source::RenderSource;
 pub use source::{EyeSample, PathSource, SampleKey};

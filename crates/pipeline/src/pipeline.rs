@@ -16,10 +16,17 @@
 //!    most similar of its four neighbouring guide rays (§3.2, eqs. 3-5), re-modulated by its
 //!    own albedo; samples are averaged with a box filter.
 //!
+//! Passes 3 and 4 run in passes of sample indices (1, 1, 2, 4, ... up to
+//! [`SAMPLE_PASS_MAX`] further samples per pixel), and each pass over chunks of at most
+//! [`SAMPLE_CHUNK`] samples whose values are added to per-pixel sums in the frame's layers,
+//! so that memory is O(pixels) whatever the spp (a record per sample was 52 bytes per
+//! sample: 56 GB at 512x512 and 4096 spp). The sums see the same additions in the same
+//! order for any chunk size.
+//!
 //! Cancellation ([`FilteredRenderer::set_cancel`]): the flag is polled per row of the guide
-//! rays and per pixel of the further samples, which are traced in passes of sample
-//! indices (1, 1, 2, 4, ... up to [`SAMPLE_PASS_MAX`]). Cancelled during the guide rays,
-//! the frame is an error ([`PipelineError::Cancelled`]); after them, the frame is
+//! rays and per sample of the further samples. Cancelled during the guide rays, the frame
+//! is an error ([`PipelineError::Cancelled`]); during a pass of further samples, the pass
+//! is undone (the sums are restored from a copy taken before it) and the frame is
 //! completed from the whole passes done: it is then exactly the frame of
 //! [`Frame::spp_done`] samples per pixel.
 //!
@@ -37,6 +44,8 @@ use filtrace_core::rng::{splitmix64, unit_f32};
 use filtrace_core::{Image, Rgb, Vec2};
 use rayon::prelude::*;
 
+use filtrace_render::memory::{try_resize, try_vec, AllocError};
+
 use crate::filter::{GuideLayers, IndirectFilter};
 use crate::lookup::{most_similar_guide, GuideGeometry, HitGeometry};
 use crate::source::{EyeSample, PathSource, SampleKey};
@@ -53,6 +62,16 @@ pub const SAMPLE_PASS_MAX: usize = 16;
 /// Largest accepted image side and pixel count (same limits as the renderer).
 pub const MAX_SIDE: u32 = 32768;
 pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Largest accepted spp: further sample `s` of a pixel is sampler index `2^24 + s`
+/// ([`crate::render_source::EYE_SAMPLE_INDEX_BASE`]), which must stay within `u32`.
+pub const MAX_SPP: u32 = 1 << 30;
+
+/// Further samples traced before their lookup (the records kept between passes 3 and 4):
+/// bounds their memory at `SAMPLE_CHUNK * 52` bytes (6.8 MB), whatever the spp and the
+/// resolution. 131,072 samples are milliseconds of tracing per chunk, against two parallel
+/// joins of overhead per chunk.
+pub const SAMPLE_CHUNK: usize = 1 << 17;
 
 /// Settings of the filtered pipeline.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -104,8 +123,7 @@ impl PipelineSettings {
         if self.spp == 0 {
             return Err(PipelineError::ZeroSpp);
         }
-        // The per-sample records of the supersampling pass must fit comfortably.
-        if (self.spp as u64 - 1) * self.width as u64 * self.height as u64 > 1 << 30 {
+        if self.spp > MAX_SPP {
             return Err(PipelineError::TooManySamples(self.spp));
         }
         Ok(())
@@ -133,6 +151,14 @@ pub enum PipelineError {
     Batch(String),
     /// The cancel flag was set before the guide rays were done: there is no frame.
     Cancelled,
+    /// A frame buffer could not be allocated.
+    OutOfMemory(AllocError),
+}
+
+impl From<AllocError> for PipelineError {
+    fn from(e: AllocError) -> Self {
+        Self::OutOfMemory(e)
+    }
 }
 
 impl std::fmt::Display for PipelineError {
@@ -146,8 +172,9 @@ impl std::fmt::Display for PipelineError {
             }
             Self::ZeroSpp => write!(f, "samples per pixel must be at least 1"),
             Self::TooManySamples(s) => {
-                write!(f, "{s} samples per pixel at this resolution need too much memory")
+                write!(f, "{s} samples per pixel is too many (at most {MAX_SPP})")
             }
+            Self::OutOfMemory(e) => write!(f, "{e}"),
             Self::CountsLength { expected, got } => {
                 write!(f, "per-pixel indirect sample counts: expected {expected} entries, got {got}")
             }
@@ -249,7 +276,7 @@ pub struct Frame {
 
 /// A further eye sample kept between the samples pass and the lookup pass.
 #[derive(Clone, Copy, Debug, Default)]
-struct SampleRecord {
+pub(crate) struct SampleRecord {
     film: Vec2,
     hit: Option<HitGeometry>,
     albedo: Rgb,
@@ -265,8 +292,47 @@ struct Buffers {
     /// The guide rays as traced, before they are stored (only with explicit batches).
     guide_samples: Vec<EyeSample>,
     batch: BatchBuffers,
+    /// The further samples of one chunk, between tracing and lookup.
     samples: Vec<SampleRecord>,
+    /// The direct, indirect and filtered-indirect sums before the current pass of further
+    /// samples, to undo a cancelled pass.
+    undo: Vec<f32>,
     frame: Frame,
+}
+
+impl Buffers {
+    /// Bytes held (capacities), the frame's layers included.
+    fn bytes(&self) -> u64 {
+        fn cap<T>(v: &Vec<T>) -> u64 {
+            (v.capacity() * std::mem::size_of::<T>()) as u64
+        }
+        let im = &self.frame.images;
+        let g = &im.guide;
+        let images = [
+            &im.color,
+            &im.noisy,
+            &im.direct,
+            &im.indirect,
+            &im.filtered_indirect,
+            &im.filtered_direct,
+            &im.indirect_map,
+            &im.filtered_map,
+            &g.normal,
+            &g.depth,
+            &g.albedo,
+            &g.position,
+            &g.coverage,
+        ];
+        let image_bytes: u64 = images.iter().map(|i| (i.data().len() * 4) as u64).sum();
+        image_bytes
+            + cap(&self.guides.hits)
+            + cap(&self.guide_direct)
+            + cap(&self.guide_samples)
+            + cap(&self.batch.slots)
+            + cap(&self.batch.results)
+            + cap(&self.samples)
+            + cap(&self.undo)
+    }
 }
 
 /// Filtered path tracing driven frame by frame (a viewer calls [`render_frame`] in its
@@ -281,13 +347,16 @@ pub struct FilteredRenderer<S: PathSource, F: IndirectFilter> {
     batch_size: Option<usize>,
     /// Set (e.g. by Ctrl-C) to stop the frame early; see the module docs.
     cancel: Option<Arc<AtomicBool>>,
+    /// Further samples per chunk of passes 3-4 ([`SAMPLE_CHUNK`]).
+    sample_chunk: usize,
     buf: Buffers,
 }
 
 impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn new(source: S, filter: F, settings: PipelineSettings) -> Result<Self, PipelineError> {
         check(&source, &settings)?;
-        Ok(Self { source, filter, settings, batch_size: None, cancel: None, buf: Buffers::default() })
+        let buf = Buffers::default();
+        Ok(Self { source, filter, settings, batch_size: None, cancel: None, sample_chunk: SAMPLE_CHUNK, buf })
     }
 
     /// A flag that, once set, stops the frames at their next check (see the module docs).
@@ -316,6 +385,22 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     }
     pub fn batch_size(&self) -> Option<usize> {
         self.batch_size
+    }
+
+    /// Further samples traced per chunk before their lookup (default [`SAMPLE_CHUNK`]); the
+    /// frame does not depend on it, only memory and overhead (`usize::MAX`: every sample
+    /// of the frame at once, the two-pass frame without chunks).
+    pub fn set_sample_chunk(&mut self, samples: usize) {
+        self.sample_chunk = samples.max(1);
+    }
+    pub fn sample_chunk(&self) -> usize {
+        self.sample_chunk
+    }
+
+    /// Bytes of the pipeline's own buffers and layers now (their capacities; the filter's
+    /// scratch is not included): what [`crate::memory::frame_bytes`] estimates.
+    pub fn buffer_bytes(&self) -> u64 {
+        self.buf.bytes()
     }
 
     pub fn source(&self) -> &S {
@@ -354,13 +439,12 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 return Err(PipelineError::CountsLength { expected: n, got: c.len() });
             }
         }
-        let extra = st.spp as usize - 1;
         let start = Instant::now();
         let source = &self.source;
         let buf = &mut self.buf;
         let (never, flag) = (AtomicBool::new(false), self.cancel.clone());
         let cancel = flag.as_deref().unwrap_or(&never);
-        resize_images(&mut buf.frame.images, w, h, st.filter_direct);
+        resize_images(&mut buf.frame.images, w, h, st.filter_direct)?;
 
         // 1. Guide rays through the pixel centres (§3.2): first hit, direct, indirect.
         let t0 = Instant::now();
@@ -370,8 +454,8 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         };
         // Every entry is written by the pass: resize, no clearing.
         (buf.guides.width, buf.guides.height) = (w, h);
-        buf.guides.hits.resize(n, None);
-        buf.guide_direct.resize(n, Rgb::ZERO);
+        try_resize(&mut buf.guides.hits, n, None, "the guide rays' hits")?;
+        try_resize(&mut buf.guide_direct, n, Rgb::ZERO, "the guide rays' direct light")?;
         match self.batch_size {
             Some(batch) if source.traces_single_paths() => {
                 // Explicit batches (§4.3): trace into per-slot buffers, then store.
@@ -381,7 +465,7 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
                 };
                 let schedule = BatchSchedule::from_counts(&counts, batch)
                     .map_err(|e| PipelineError::Batch(e.to_string()))?;
-                buf.guide_samples.resize(n, EyeSample::default());
+                try_resize(&mut buf.guide_samples, n, EyeSample::default(), "the guide rays")?;
                 let bb = &mut buf.batch;
                 guide_pass_batched(source, &schedule, bb, &mut buf.guide_samples, w, st.seed, cancel);
                 let rows = guide_rows(&mut buf.guides.hits, &mut buf.guide_direct, &mut buf.frame.images, w);
@@ -409,24 +493,12 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         }
         let mut filter_ms = ms(t1);
 
-        // 3. Further eye samples, jittered in the pixel: first hit and direct light only, in
-        //    passes of sample indices so that a cancelled frame keeps whole passes.
-        let t2 = Instant::now();
-        buf.samples.resize(n * extra, SampleRecord::default());
-        let mut done = 0;
-        while done < extra && !cancel.load(Ordering::Relaxed) {
-            let count = done.clamp(1, SAMPLE_PASS_MAX).min(extra - done);
-            if !samples_pass(source, &mut buf.samples, (w, extra), done..done + count, st.seed, cancel) {
-                break;
-            }
-            done += count;
-        }
-        let samples_ms = ms(t2);
-
-        // 4. Geometry-aware lookup (eqs. 3-5) and box reconstruction.
-        let t3 = Instant::now();
-        let failures = lookup_and_reconstruct(buf, w, (extra, done), st.demodulate_albedo);
-        let lookup_ms = ms(t3);
+        // 3. Further eye samples, jittered in the pixel: first hit and direct light only;
+        // 4. their geometry-aware lookup (eqs. 3-5) and box reconstruction. In passes of
+        // sample indices (a cancelled frame keeps whole passes), a chunk of samples at a
+        // time (memory independent of spp).
+        let (samples_ms, lookup_ms, failures, done) =
+            supersample(source, buf, &st, self.sample_chunk, cancel)?;
 
         // Optional: the direct light filtered too (comparison only).
         if st.filter_direct {
@@ -463,27 +535,33 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) {
-    let fit = |img: &mut Image, c: usize| {
+/// Gives every layer the frame's size (allocated fallibly; each pass writes all of its
+/// layer).
+fn resize_images(im: &mut FrameImages, w: usize, h: usize, filter_direct: bool) -> Result<(), AllocError> {
+    let fit = |img: &mut Image, c: usize| -> Result<(), AllocError> {
         if img.width() != w || img.height() != h || img.channels() != c {
-            *img = Image::new(w, h, c);
+            *img = Image::new(0, 0, c); // free the old layer first
+            let data = try_vec(w * h * c, 0.0, &format!("the {w}x{h} frame layers"))?;
+            *img = Image::from_vec(w, h, c, data).expect("w * h * c values");
         }
+        Ok(())
     };
     for img in [&mut im.color, &mut im.noisy, &mut im.direct, &mut im.indirect, &mut im.filtered_indirect] {
-        fit(img, 3);
+        fit(img, 3)?;
     }
-    fit(&mut im.indirect_map, 3);
-    fit(&mut im.filtered_map, 3);
-    fit(&mut im.guide.normal, 3);
-    fit(&mut im.guide.albedo, 3);
-    fit(&mut im.guide.position, 3);
-    fit(&mut im.guide.depth, 1);
-    fit(&mut im.guide.coverage, 1);
+    fit(&mut im.indirect_map, 3)?;
+    fit(&mut im.filtered_map, 3)?;
+    fit(&mut im.guide.normal, 3)?;
+    fit(&mut im.guide.albedo, 3)?;
+    fit(&mut im.guide.position, 3)?;
+    fit(&mut im.guide.depth, 1)?;
+    fit(&mut im.guide.coverage, 1)?;
     if filter_direct {
-        fit(&mut im.filtered_direct, 3);
+        fit(&mut im.filtered_direct, 3)?;
     } else {
         im.filtered_direct = Image::new(0, 0, 3);
     }
+    Ok(())
 }
 
 /// Indirect path counts of the guide rays: one for every pixel, or one per pixel.
@@ -753,35 +831,6 @@ fn store_guides<'a>(g: &[EyeSample], rows: impl IndexedParallelIterator<Item = G
     });
 }
 
-/// Further samples `range` (0-based: sample index `k + 1`) of every pixel into their
-/// records (`extra` per pixel, rows of `w` pixels in parallel). False when `cancel` stopped
-/// it before every pixel had the whole range.
-fn samples_pass<S: PathSource>(
-    source: &S,
-    samples: &mut [SampleRecord],
-    (w, extra): (usize, usize),
-    range: Range<usize>,
-    seed: u64,
-    cancel: &AtomicBool,
-) -> bool {
-    let stopped = AtomicBool::new(false);
-    samples.par_chunks_mut(w * extra).enumerate().for_each(|(y, row)| {
-        for (x, records) in row.chunks_mut(extra).enumerate() {
-            if cancel.load(Ordering::Relaxed) {
-                stopped.store(true, Ordering::Relaxed);
-                return;
-            }
-            for k in range.clone() {
-                let key = SampleKey { x: x as u32, y: y as u32, sample: k as u32 + 1, seed };
-                let film = Vec2::new(x as f32, y as f32) + jitter(key);
-                let e = source.trace(key, film, 0);
-                records[k] = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
-            }
-        }
-    });
-    !stopped.into_inner()
-}
-
 /// Jitter of further sample `key` inside its pixel, in `[0, 1)^2`: a hash of the key.
 fn jitter(key: SampleKey) -> Vec2 {
     let mut h = key.seed ^ 0x243f_6a88_85a3_08d3;
@@ -791,58 +840,207 @@ fn jitter(key: SampleKey) -> Vec2 {
     Vec2::new(unit_f32(h), unit_f32(splitmix64(h)))
 }
 
-/// Pass 4: for each pixel, the guide sample and its first `done` further samples (of the
-/// `extra` records per pixel) get direct + re-modulated indirect from the unfiltered and
-/// the filtered map; box average. Returns the number of samples whose lookup found no
-/// guide that hit.
-fn lookup_and_reconstruct(buf: &mut Buffers, w: usize, (extra, done): (usize, usize), demod: bool) -> u64 {
-    let Buffers { guides, guide_direct, samples, frame, .. } = buf;
-    let im = &mut frame.images;
+/// Passes 3 and 4: further samples `1..=extra` of every pixel in passes of sample indices
+/// (1, 1, 2, 4, ... up to [`SAMPLE_PASS_MAX`] per pixel), each pass over chunks of at most
+/// `chunk` samples: trace a chunk into `buf.samples` ([`trace_samples`]), then add each
+/// sample to its pixel's sums ([`lookup_samples`]). The guide ray's own terms start the sums
+/// ([`start_sums`]); the box mean is taken last ([`finish_sums`]). Every pixel's sums get
+/// its samples in index order whatever the chunk and pass sizes, so the frame is the same
+/// bit for bit. A pass cut by `cancel` is undone from a copy of the sums. Returns the
+/// milliseconds of tracing and of lookup, the lookup failures and the further samples done.
+fn supersample<S: PathSource>(
+    source: &S,
+    buf: &mut Buffers,
+    st: &PipelineSettings,
+    chunk: usize,
+    cancel: &AtomicBool,
+) -> Result<(f64, f64, u64, usize), AllocError> {
+    let (w, demod) = (st.width as usize, st.demodulate_albedo);
+    let pixels = w * st.height as usize;
+    let extra = st.spp as usize - 1;
+    let chunk = chunk.clamp(1, (pixels * extra.min(SAMPLE_PASS_MAX)).max(1));
+    try_resize(&mut buf.samples, chunk, SampleRecord::default(), "the further samples")?;
+    let undo_len = if extra > 0 { pixels * 9 } else { 0 };
+    try_resize(&mut buf.undo, undo_len, 0.0, "the copy of the sums for a cancelled pass")?;
+    let t = Instant::now();
+    start_sums(buf, demod);
+    let (mut samples_ms, mut lookup_ms) = (0.0, ms(t));
+    let (mut failures, mut done) = (0, 0);
+    while done < extra && !cancel.load(Ordering::Relaxed) {
+        let pass = SamplePass { first: done, count: done.clamp(1, SAMPLE_PASS_MAX).min(extra - done) };
+        save_sums(buf);
+        let total = pixels * pass.count;
+        let (mut at, mut pass_failures) = (0, 0);
+        while at < total {
+            let len = chunk.min(total - at);
+            let t = Instant::now();
+            let traced = trace_samples(source, &mut buf.samples[..len], at, pass, w, st.seed, cancel);
+            samples_ms += ms(t);
+            if !traced {
+                restore_sums(buf);
+                return Ok((samples_ms, lookup_ms, failures, done));
+            }
+            let t = Instant::now();
+            pass_failures += lookup_samples(buf, at..at + len, pass.count, demod);
+            lookup_ms += ms(t);
+            at += len;
+        }
+        failures += pass_failures;
+        done += pass.count;
+    }
+    let t = Instant::now();
+    finish_sums(&mut buf.frame.images, done);
+    Ok((samples_ms, lookup_ms + ms(t), failures, done))
+}
+
+/// Further samples `first + 1 ..= first + count` of every pixel. Sample `r` of a pass is
+/// sample `first + r % count + 1` of row-major pixel `r / count`.
+#[derive(Clone, Copy)]
+struct SamplePass {
+    first: usize,
+    count: usize,
+}
+
+/// The sums a pass adds to (direct, indirect, filtered indirect), copied before it.
+fn save_sums(buf: &mut Buffers) {
+    let im = &buf.frame.images;
+    let n = im.direct.data().len();
+    for (k, layer) in [&im.direct, &im.indirect, &im.filtered_indirect].into_iter().enumerate() {
+        buf.undo[k * n..(k + 1) * n].copy_from_slice(layer.data());
+    }
+}
+
+fn restore_sums(buf: &mut Buffers) {
+    let im = &mut buf.frame.images;
+    let n = im.direct.data().len();
+    for (k, layer) in [&mut im.direct, &mut im.indirect, &mut im.filtered_indirect].into_iter().enumerate() {
+        layer.data_mut().copy_from_slice(&buf.undo[k * n..(k + 1) * n]);
+    }
+}
+
+/// Pass 3 on samples `first..first + out.len()` of `pass`: first hit and direct light of
+/// each further eye ray, jittered in its pixel. Returns false, with `out` incomplete, when
+/// `cancel` was set.
+fn trace_samples<S: PathSource>(
+    source: &S,
+    out: &mut [SampleRecord],
+    first: usize,
+    pass: SamplePass,
+    w: usize,
+    seed: u64,
+    cancel: &AtomicBool,
+) -> bool {
+    out.par_iter_mut()
+        .enumerate()
+        .try_for_each(|(k, rec)| {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(());
+            }
+            let (p, s) = ((first + k) / pass.count, (pass.first + (first + k) % pass.count) as u32 + 1);
+            let key = SampleKey { x: (p % w) as u32, y: (p / w) as u32, sample: s, seed };
+            let film = Vec2::new(key.x as f32, key.y as f32) + jitter(key);
+            let e = source.trace(key, film, 0);
+            *rec = SampleRecord { film, hit: e.hit, albedo: e.albedo, direct: e.direct };
+            Ok(())
+        })
+        .is_ok()
+}
+
+/// Factor that re-modulates a demodulated map entry at a sample of albedo `albedo`.
+#[inline]
+fn remodulation(albedo: Rgb, demod: bool) -> Rgb {
+    if demod {
+        albedo + DEMODULATION_EPS
+    } else {
+        Rgb::ONE
+    }
+}
+
+/// The RGB value of one pixel's 3 values.
+#[inline]
+fn load(layer: &[f32]) -> Rgb {
+    Rgb::new(layer[0], layer[1], layer[2])
+}
+
+/// Starts each pixel's sums with its guide ray: its direct light, and its own map entry
+/// (unfiltered and filtered) re-modulated by its albedo.
+fn start_sums(buf: &mut Buffers, demod: bool) {
+    let im = &mut buf.frame.images;
     let (map, fmap, albedo) = (&im.indirect_map, &im.filtered_map, &im.guide.albedo);
+    let guide_direct = &buf.guide_direct;
+    im.direct
+        .data_mut()
+        .par_chunks_mut(3)
+        .zip(im.indirect.data_mut().par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut().par_chunks_mut(3))
+        .enumerate()
+        .for_each(|(own, ((d, ind), find))| {
+            let m = remodulation(map_rgb(albedo, own), demod);
+            d.copy_from_slice(&guide_direct[own].to_array());
+            ind.copy_from_slice(&(m * map_rgb(map, own)).to_array());
+            find.copy_from_slice(&(m * map_rgb(fmap, own)).to_array());
+        });
+}
+
+/// Pass 4 on samples `range` of a pass of `per_pixel` samples per pixel (traced into `buf.samples[..range.len()]`): each
+/// sample's direct light, and its indirect light from the unfiltered and the filtered map
+/// at the most similar neighbouring guide ray, added to its pixel's sums in sample order.
+/// Returns the number of samples whose lookup found no guide that hit.
+fn lookup_samples(buf: &mut Buffers, range: Range<usize>, per_pixel: usize, demod: bool) -> u64 {
+    let Buffers { guides, samples, frame, .. } = buf;
+    let im = &mut frame.images;
+    let (map, fmap) = (&im.indirect_map, &im.filtered_map);
+    let pixels = range.start / per_pixel..(range.end - 1) / per_pixel + 1;
+    let values = pixels.start * 3..pixels.end * 3;
+    im.direct.data_mut()[values.clone()]
+        .par_chunks_mut(3)
+        .zip(im.indirect.data_mut()[values.clone()].par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut()[values].par_chunks_mut(3))
+        .enumerate()
+        .map(|(i, ((d, ind), find))| {
+            let p = pixels.start + i;
+            let own = range.start.max(p * per_pixel)..range.end.min((p + 1) * per_pixel);
+            let (mut sd, mut si, mut sf) = (load(d), load(ind), load(find));
+            let mut fails = 0u64;
+            for rec in &samples[own.start - range.start..own.end - range.start] {
+                sd += rec.direct;
+                let Some(hit) = &rec.hit else { continue };
+                match most_similar_guide(guides, rec.film, hit) {
+                    Some(g) => {
+                        let m = remodulation(rec.albedo, demod);
+                        si += m * map_rgb(map, g);
+                        sf += m * map_rgb(fmap, g);
+                    }
+                    None => fails += 1,
+                }
+            }
+            d.copy_from_slice(&sd.to_array());
+            ind.copy_from_slice(&si.to_array());
+            find.copy_from_slice(&sf.to_array());
+            fails
+        })
+        .sum()
+}
+
+/// Box reconstruction: the sums of `done + 1` samples become means; `noisy` and `color`
+/// are direct + unfiltered and direct + filtered indirect.
+fn finish_sums(im: &mut FrameImages, done: usize) {
     let inv = 1.0 / (done + 1) as f32;
-    let remod = |albedo: Rgb| if demod { albedo + DEMODULATION_EPS } else { Rgb::ONE };
-    let row = w * 3;
-    let failures = std::sync::atomic::AtomicU64::new(0);
     im.color
         .data_mut()
-        .par_chunks_mut(row)
-        .zip(im.noisy.data_mut().par_chunks_mut(row))
-        .zip(im.direct.data_mut().par_chunks_mut(row))
-        .zip(im.indirect.data_mut().par_chunks_mut(row))
-        .zip(im.filtered_indirect.data_mut().par_chunks_mut(row))
-        .enumerate()
-        .for_each(|(y, ((((color, noisy), direct), indirect), filtered))| {
-            let mut fails = 0u64;
-            for x in 0..w {
-                let own = y * w + x;
-                // The guide ray takes its own map entry.
-                let m = remod(map_rgb(albedo, own));
-                let mut d = guide_direct[own];
-                let mut ind = m * map_rgb(map, own);
-                let mut find = m * map_rgb(fmap, own);
-                for rec in &samples[own * extra..own * extra + done] {
-                    d += rec.direct;
-                    let Some(hit) = &rec.hit else { continue };
-                    match most_similar_guide(guides, rec.film, hit) {
-                        Some(i) => {
-                            let m = remod(rec.albedo);
-                            ind += m * map_rgb(map, i);
-                            find += m * map_rgb(fmap, i);
-                        }
-                        None => fails += 1,
-                    }
-                }
-                let (d, ind, find) = (d * inv, ind * inv, find * inv);
-                let px = x * 3..x * 3 + 3;
-                direct[px.clone()].copy_from_slice(&d.to_array());
-                indirect[px.clone()].copy_from_slice(&ind.to_array());
-                filtered[px.clone()].copy_from_slice(&find.to_array());
-                noisy[px.clone()].copy_from_slice(&(d + ind).to_array());
-                color[px].copy_from_slice(&(d + find).to_array());
-            }
-            failures.fetch_add(fails, std::sync::atomic::Ordering::Relaxed);
+        .par_chunks_mut(3)
+        .zip(im.noisy.data_mut().par_chunks_mut(3))
+        .zip(im.direct.data_mut().par_chunks_mut(3))
+        .zip(im.indirect.data_mut().par_chunks_mut(3))
+        .zip(im.filtered_indirect.data_mut().par_chunks_mut(3))
+        .for_each(|((((color, noisy), direct), indirect), filtered)| {
+            let (d, ind, find) = (load(direct) * inv, load(indirect) * inv, load(filtered) * inv);
+            direct.copy_from_slice(&d.to_array());
+            indirect.copy_from_slice(&ind.to_array());
+            filtered.copy_from_slice(&find.to_array());
+            noisy.copy_from_slice(&(d + ind).to_array());
+            color.copy_from_slice(&(d + find).to_array());
         });
-    failures.into_inner()
 }
 
 #[inline]

@@ -14,6 +14,8 @@
 
 use filtrace_core::{Image, Rgb, Vec3};
 
+use crate::memory::{self, AllocError};
+
 /// The surface seen through the pixel centre. A miss is the all-zero record: albedo 0,
 /// normal the zero vector (= "no surface"; filters test for it), position 0, depth 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -139,6 +141,14 @@ impl Film {
         Self { width, height, pixels: vec![FilmPixel::default(); width * height] }
     }
 
+    /// [`Film::new`] with the pixels allocated fallibly: a film that does not fit is an
+    /// error, not an abort (see [`crate::memory`]).
+    pub fn try_new(width: usize, height: usize) -> Result<Self, AllocError> {
+        let what = format!("the {width}x{height} film");
+        let pixels = memory::try_vec(width * height, FilmPixel::default(), &what)?;
+        Ok(Self { width, height, pixels })
+    }
+
     pub fn width(&self) -> usize {
         self.width
     }
@@ -199,18 +209,27 @@ impl Film {
 
     /// The AOV images of the current state.
     pub fn aovs(&self) -> Aovs {
+        self.try_aovs().unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Film::aovs`] with the images allocated fallibly.
+    pub fn try_aovs(&self) -> Result<Aovs, AllocError> {
         let (w, h) = (self.width, self.height);
+        let image = |c: usize| -> Result<Image, AllocError> {
+            let data = memory::try_vec(w * h * c, 0.0f32, &format!("the {w}x{h} AOV images"))?;
+            Ok(Image::from_vec(w, h, c, data).expect("size matches"))
+        };
         let mut a = Aovs {
             width: w,
             height: h,
-            color: Image::new(w, h, 3),
-            variance: Image::new(w, h, 3),
-            direct: Image::new(w, h, 3),
-            indirect: Image::new(w, h, 3),
-            albedo: Image::new(w, h, 3),
-            normal: Image::new(w, h, 3),
-            position: Image::new(w, h, 3),
-            depth: Image::new(w, h, 1),
+            color: image(3)?,
+            variance: image(3)?,
+            direct: image(3)?,
+            indirect: image(3)?,
+            albedo: image(3)?,
+            normal: image(3)?,
+            position: image(3)?,
+            depth: image(1)?,
         };
         let to_rgb = |v: [f64; 3]| Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
         for y in 0..h {
@@ -227,7 +246,7 @@ impl Film {
                 a.depth.pixel_mut(x, y)[0] = p.surface.depth;
             }
         }
-        a
+        Ok(a)
     }
 }
 

@@ -15,6 +15,7 @@ pub mod camera;
 pub mod film;
 pub mod integrator;
 pub mod lights;
+pub mod memory;
 pub mod renderer;
 pub mod surface;
 pub mod texture;

@@ -26,6 +26,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Samples per pixel without `--spp` (with `--adaptive`, the budget is used instead).
+pub const DEFAULT_SPP: u32 = 64;
+
 /// Largest accepted image side (same as the renderer's limit).
 pub const MAX_SIDE: u32 = filtrace_render::renderer::MAX_SIDE;
 
@@ -35,9 +38,9 @@ pub struct CommonArgs {
     /// Built-in scene name (`cornell`) or a scene file (.toml, .obj, .gltf/.glb, .ply).
     #[arg(default_value = "cornell")]
     pub scene: String,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 64)]
-    pub spp: u32,
+    /// Samples per pixel [default: 64; with --adaptive: the --budget-spp].
+    #[arg(long, value_name = "N")]
+    pub spp: Option<u32>,
     /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
     #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
     pub res: Resolution,
@@ -145,12 +148,17 @@ impl CommonArgs {
         let s = RenderSettings {
             width: self.res.width,
             height: self.res.height,
-            spp: self.spp,
+            spp: self.spp(),
             max_depth: self.max_depth,
             seed: self.seed,
         };
         s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(s)
+    }
+
+    /// `--spp`, or [`DEFAULT_SPP`].
+    pub fn spp(&self) -> u32 {
+        self.spp.unwrap_or(DEFAULT_SPP)
     }
 
     /// A short name for the scene: the built-in name or the file stem.
@@ -216,7 +224,7 @@ impl CommonArgs {
 
     /// Most samples per pixel per pass.
     pub fn pass_spp(&self) -> u32 {
-        self.passes_spp.unwrap_or((self.spp / 16).max(1)).min(self.spp.max(1))
+        self.passes_spp.unwrap_or((self.spp() / 16).max(1)).min(self.spp().max(1))
     }
 }
 
@@ -408,6 +416,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The plain path-traced render (no filter, uniform sampling).
 pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
+    super::render_filtered::check_memory(filtrace_render::memory::plain_render(
+        settings.width,
+        settings.height,
+    ))?;
     // First: until the render starts, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
 
@@ -445,7 +457,7 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
         return Err(Interrupted.into());
     }
 
-    let aovs = film.aovs();
+    let aovs = film.try_aovs()?;
     let counts = film.sample_counts();
     let attributes = render_attributes(settings.spp, film.min_samples(), cancelled);
     let written =

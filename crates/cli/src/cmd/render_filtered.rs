@@ -24,7 +24,17 @@ use filtrace_pipeline::{
 use filtrace_render::Renderer;
 use serde::Serialize;
 
-use super::render::{render_attributes, test_hook, CommonArgs, CtrlC, Interrupted};
+use super::render::{render_attributes, test_hook, CommonArgs, CtrlC, Interrupted, DEFAULT_SPP};
+
+/// What to do when a render does not fit in memory.
+const MEMORY_HINT: &str = "Lower --res: the film and the images grow with the pixel count \
+(--spp does not change them); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit";
+
+/// Refuses a render whose estimate `needs` is more than this machine has available
+/// ([`filtrace_render::memory::check`]): called before the scene is loaded.
+pub fn check_memory(needs: filtrace_render::memory::MemoryEstimate) -> anyhow::Result<()> {
+    filtrace_render::memory::check(&needs.with_hint(MEMORY_HINT)).map_err(anyhow::Error::msg)
+}
 
 /// Reconstruction filter options of `filtrace render`.
 #[derive(clap::Args, Debug, Clone)]
@@ -128,7 +138,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let settings = PipelineSettings {
         width: common.res.width,
         height: common.res.height,
-        spp: common.spp,
+        spp: adaptive.eye_spp(common.spp),
         indirect_paths: filter.indirect_paths,
         seed: common.seed,
         demodulate_albedo: !filter.no_demodulate,
@@ -137,6 +147,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let choice = filter.choice();
     choice.denoise_filter().map_err(|e| anyhow::anyhow!("{e}"))?;
+    check_memory(filtrace_pipeline::memory::render_bytes(&settings, &choice.name, adaptive.adaptive))?;
     // First: until the frame starts, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
     let t0 = Instant::now();
@@ -150,6 +161,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     let threads = pool.current_num_threads();
     let mut pipeline = pool.install(|| build_pipeline(scene, settings.clone(), common.max_depth, &choice))?;
     let build_s = pipeline.source().renderer().build_seconds();
+    let filter_label = pipeline.filter_mut().label();
     test_hook("built", ctrlc.flag());
     pipeline.set_cancel(Some(ctrlc.flag().clone()));
     ctrlc.arm();
@@ -160,20 +172,21 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     // apportioned per-pixel indirect path counts, then the frame with those counts.
     let mut plan_ms = None;
     let mut adaptive_layers = None;
-    let frame = match adaptive.params() {
-        None => pool.install(|| pipeline.render_frame().cloned()).map_err(|e| frame_error(e, &out))?,
+    // The frame stays in the pipeline (no copy: it is the biggest buffer of the command).
+    match adaptive.params() {
+        None => pool.install(|| pipeline.render_frame().map(|_| ())).map_err(|e| frame_error(e, &out))?,
         Some(params) => {
-            let (frame, plan) = pool
-                .install(|| pipeline.render_frame_adaptive(&params).map(|(f, p)| (f.clone(), p)))
-                .map_err(|e| match e {
+            let plan = pool.install(|| pipeline.render_frame_adaptive(&params).map(|(_, p)| p)).map_err(
+                |e| match e {
                     AdaptiveFrameError::Pipeline(e) => frame_error(e, &out),
                     e => anyhow::anyhow!("{e}"),
-                })?;
+                },
+            )?;
             plan_ms = Some(plan.prepass_ms + plan.plan_ms);
             adaptive_layers = Some((plan.importance, plan.counts.to_image()));
-            frame
         }
     };
+    let frame = pipeline.last_frame();
     let extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
         Some((importance, counts)) => {
             vec![("importance", &["Y"], importance), ("indirect_paths", &["Y"], counts)]
@@ -182,7 +195,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     };
     let cancelled = ctrlc.is_set();
     let attributes = render_attributes(settings.spp, frame.spp_done, cancelled);
-    write_frame(&out, &frame, &extra, &attributes, &common.tonemap())?;
+    write_frame(&out, frame, &extra, &attributes, &common.tonemap())?;
     let m = frame.images.color.mean();
     let summary = Summary {
         scene: &common.scene,
@@ -193,7 +206,7 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         indirect_paths: settings.indirect_paths,
         max_depth: common.max_depth,
         seed: settings.seed,
-        filter: pipeline.filter_mut().label(),
+        filter: filter_label,
         threads,
         load_s,
         build_s,
@@ -327,7 +340,9 @@ pub struct AdaptiveArgs {
     /// Distribute the indirect-light samples by an importance map instead of uniformly.
     #[arg(long)]
     pub adaptive: bool,
-    /// Frame budget in samples per pixel on average (total = budget-spp x pixels).
+    /// Indirect-light paths per pixel on average (the frame traces budget-spp x pixels of
+    /// them from the guide rays' hits, apportioned by importance). Without --spp, the eye
+    /// samples per pixel (guide ray + direct-light-only samples) are this number too.
     #[arg(long, default_value_t = 4, requires = "adaptive")]
     pub budget_spp: u32,
     /// Minimum samples of every pixel (the paper: 1 or 2).
@@ -343,6 +358,17 @@ pub struct AdaptiveArgs {
 }
 
 impl AdaptiveArgs {
+    /// Eye samples per pixel: `--spp` when given; else, with `--adaptive`, the budget (so
+    /// that `--budget-spp 4` is a 4-sample frame, not 4 paths under 64 eye samples), and
+    /// [`DEFAULT_SPP`] without it.
+    pub fn eye_spp(&self, spp: Option<u32>) -> u32 {
+        match spp {
+            Some(s) => s,
+            None if self.adaptive => self.budget_spp.max(1),
+            None => DEFAULT_SPP,
+        }
+    }
+
     /// The adaptive parameters these options select, or `None` without `--adaptive`.
     pub fn params(&self) -> Option<filtrace_adaptive::AdaptiveParams> {
         use filtrace_adaptive::{AdaptiveParams, ImportanceParams, Mode};

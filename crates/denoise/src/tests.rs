@@ -808,20 +808,25 @@ fn underflowing_weight_sums_stay_finite() {
 /// Cycles' AOVs: depth `1e10` where rays escape, also on edge pixels whose normal is set.
 /// Those pixels are background, the depth scale comes from the surfaces (not 1e10), and the
 /// guided filter's output stays finite and inside the input's range, with the scale
-/// estimated and with Blender's explicit scene scale (`-1e6` before the fix).
+/// estimated and with Blender's explicit scene scale (before the fix: 1.4e10 here, -1e6 on
+/// the Cycles frame).
 #[test]
 fn cycles_escaped_ray_depth_is_background_and_outputs_stay_in_range() {
-    let (w, h) = (64, 48);
+    // A sphere (with its ring of edge pixels) above a floor that starts a window's height
+    // below it: the floor's windows see the running sums after the ring's huge depths.
+    let (w, h) = (96, 128);
     let mut rng = Rng::new(17);
     let (mut n, mut d, mut c) = (Vec::new(), Vec::new(), Vec::new());
     for y in 0..h {
         for x in 0..w {
-            let inside = (x as i32 - 30).pow(2) + (y as i32 - 24).pow(2) < 400;
-            let edge = !inside && (x as i32 - 30).pow(2) + (y as i32 - 24).pow(2) < 480;
+            let r2 = (x as i32 - 30).pow(2) + (y as i32 - 24).pow(2);
+            let inside = r2 < 400 || y >= 80;
+            let edge = !inside && r2 < 480;
             let normal = if inside || edge { [0.3, 0.2, 0.93] } else { [0.0; 3] };
             n.extend_from_slice(&normal);
             d.push(if inside { 10.0 + 0.1 * x as f32 + rng.f32() } else { 1e10 });
-            let v = if inside { 2.0 * rng.f32() } else { 0.6 };
+            // Edge pixels mix surface and sky: noisy like the surface.
+            let v = if inside || edge { 2.0 * rng.f32() } else { 0.6 };
             c.extend_from_slice(&[v, 0.5 * v, 0.6]);
         }
     }
@@ -829,16 +834,16 @@ fn cycles_escaped_ray_depth_is_background_and_outputs_stay_in_range() {
     let g =
         GBuffer::new(Image::from_vec(w, h, 3, n).unwrap()).with_depth(Image::from_vec(w, h, 1, d).unwrap());
     let scale = crate::gbuffer::depth_scale(&g, g.depth.as_ref().unwrap());
-    assert!((10.0..20.0).contains(&scale), "depth scale {scale} comes from surfaces only");
+    assert!((10.0..25.0).contains(&scale), "depth scale {scale} comes from surfaces only");
     for scene_scale in [None, Some(16.75)] {
         let g = GBuffer { scene_scale, ..g.clone() };
         for (name, f) in all_filters() {
             let Ok(out) = f.apply(&color, &g) else { continue }; // (presets needing a position)
             for (i, (o, c)) in out.data().iter().zip(color.data()).enumerate() {
                 assert!(o.is_finite() && (0.0..=2.0).contains(o), "{name} {scene_scale:?}: value {i} = {o}");
-                if !crate::gbuffer::surface_at(&g, i / 3) {
-                    // (Background is constant: filtered among itself it stays so.)
-                    assert!((o - c).abs() <= 1e-5 * c, "{name} {scene_scale:?}: background {i}: {o} vs {c}");
+                // The guided filter passes background (edge pixels included) through.
+                if name.starts_with("guided") && !crate::gbuffer::surface_at(&g, i / 3) {
+                    assert_eq!(o, c, "{name} {scene_scale:?}: background {i}");
                 }
             }
         }

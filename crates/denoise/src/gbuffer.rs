@@ -4,8 +4,10 @@
 //! and guides once to planes (one `Vec<f32>` per channel) so that inner loops run over
 //! contiguous `f32` rows, and sanitise them there:
 //! - a pixel whose normal is zero (or non-finite) is *background*; filters never mix
-//!   background and surface pixels;
-//! - a non-finite colour value marks the pixel *invalid*: it never contributes to a
+//!   background and surface pixels. So is a pixel whose depth or position (when given) is
+//!   non-finite or at least [`FAR_BACKGROUND`] away: Cycles writes depth `1e10` where rays
+//!   escape, also on edge pixels whose (pixel-filtered) normal is set;
+//! - a non-finite colour value (or one of [`COLOR_LIMIT`] or more) marks the pixel *invalid*: it never contributes to a
 //!   neighbour, and its own output is rebuilt from valid neighbours (0 when there are none).
 
 use crate::error::DenoiseError;
@@ -30,7 +32,8 @@ pub struct GBuffer {
     /// Length that positions and depths are divided by to make them unitless, e.g. the
     /// scene's bounding-box diagonal. Give a constant per scene so the filter is stable over
     /// frames; `None` estimates it from this frame (position: diagonal of the surface
-    /// points' box; depth: largest surface depth).
+    /// points' box; depth: the [`DEPTH_SCALE_PERCENTILE`] of the surface depths), from
+    /// surface pixels only (see [`surface_at`]).
     pub scene_scale: Option<f32>,
 }
 
@@ -100,6 +103,68 @@ impl GBuffer {
 pub(crate) fn is_surface(n: &[f32]) -> bool {
     let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
     l2.is_finite() && l2 > 1e-12
+}
+
+/// Colour values of this magnitude or more are invalid, as non-finite ones are: no radiance
+/// is that large, and sums of a few of them would overflow f32 (`3e38` everywhere gave a
+/// black image).
+pub const COLOR_LIMIT: f32 = 1e30;
+
+/// A colour value the filters use: finite and below [`COLOR_LIMIT`] in magnitude.
+#[inline]
+pub fn is_valid_color(v: f32) -> bool {
+    v.abs() < COLOR_LIMIT // false for NaN and infinities too
+}
+
+/// Depths and position coordinates of this magnitude or more are background (or garbage),
+/// not surfaces: Cycles writes `1e10` for escaped rays, other renderers `f32::MAX` or
+/// infinity. No scene is modelled at 1e9 units (a million kilometres in metres).
+pub const FAR_BACKGROUND: f32 = 1e9;
+
+/// A depth or position value a surface can have: finite and below [`FAR_BACKGROUND`].
+#[inline]
+pub fn is_valid_distance(v: f32) -> bool {
+    v.abs() < FAR_BACKGROUND // false for NaN and infinities too
+}
+
+/// Whether pixel `i` of `g` is a surface: its normal is set ([`is_surface`]) and its depth
+/// and position, when given, are valid ([`is_valid_distance`]).
+#[inline]
+pub fn surface_at(g: &GBuffer, i: usize) -> bool {
+    is_surface(&g.normal.data()[3 * i..3 * i + 3])
+        && g.depth.as_ref().is_none_or(|d| is_valid_distance(d.data()[i]))
+        && g.position
+            .as_ref()
+            .is_none_or(|p| p.data()[3 * i..3 * i + 3].iter().all(|v| is_valid_distance(*v)))
+}
+
+/// The depth scale is this percentile of the surface pixels' depths, not their maximum: a
+/// few far pixels (a distant object, a missed background) must not shrink every depth to
+/// ~0 and so switch the depth term off.
+pub const DEPTH_SCALE_PERCENTILE: f64 = 0.99;
+
+/// Scaled guide values are clamped to this magnitude: a user's tiny `scene_scale` then never
+/// makes them infinite (the filters subtract and square them).
+pub(crate) const GUIDE_LIMIT: f32 = 1e6;
+
+/// The depth scale of `g` (its `scene_scale` when set, else [`DEPTH_SCALE_PERCENTILE`] of
+/// `|depth|` over surface pixels; 1 when there is none or it is 0).
+pub(crate) fn depth_scale(g: &GBuffer, depth: &Image) -> f32 {
+    if let Some(s) = g.scene_scale {
+        return s;
+    }
+    let mut d: Vec<f32> =
+        (0..depth.pixel_count()).filter(|&i| surface_at(g, i)).map(|i| depth.data()[i].abs()).collect();
+    if d.is_empty() {
+        return 1.0;
+    }
+    let k = ((d.len() - 1) as f64 * DEPTH_SCALE_PERCENTILE).round() as usize;
+    let (_, v, _) = d.select_nth_unstable_by(k, f32::total_cmp);
+    if *v > 0.0 {
+        *v
+    } else {
+        1.0
+    }
 }
 
 /// Checks that `color` is a 3-channel image with at least one pixel... or empty.
@@ -185,7 +250,7 @@ fn split_rows<const VALID: bool>(
     for (r, src) in src.chunks_exact(3 * w).enumerate() {
         let o = r * stride;
         for (i, px) in src.chunks_exact(3).enumerate() {
-            let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
+            let ok = is_valid_color(px[0]) && is_valid_color(px[1]) && is_valid_color(px[2]);
             bad |= !ok;
             a[o + i] = if ok { px[0] } else { 0.0 };
             b[o + i] = if ok { px[1] } else { 0.0 };
@@ -306,27 +371,32 @@ impl Guides {
                     }
                 });
         }
-        let surface_px = |i: usize| is_surface(&g.normal.data()[3 * i..3 * i + 3]);
+        // Invalid depths and positions make background too (see `surface_at`).
+        if n > 0 && (g.depth.is_some() || g.position.is_some()) {
+            let [n0, n1, n2] = &mut normal;
+            n0.par_chunks_mut(stride)
+                .zip(n1.par_chunks_mut(stride))
+                .zip(n2.par_chunks_mut(stride))
+                .zip(surface.par_chunks_mut(stride))
+                .enumerate()
+                .for_each(|(y, (((a, b), c), s))| {
+                    for x in 0..width {
+                        if s[x] != 0.0 && !surface_at(g, y * width + x) {
+                            (a[x], b[x], c[x], s[x]) = (0.0, 0.0, 0.0, 0.0);
+                        }
+                    }
+                });
+        }
+        let surface_px = |i: usize| surface_at(g, i);
+        let limit = |v: f32| v.clamp(-GUIDE_LIMIT, GUIDE_LIMIT);
         // The depth plane is only needed as the position.
         let depth = g.depth.as_ref().filter(|_| g.position.is_none()).map(|d| {
-            let scale = g.scene_scale.unwrap_or_else(|| {
-                let m = d
-                    .data()
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, v)| surface_px(*i) && v.is_finite())
-                    .fold(0.0f32, |m, (_, v)| m.max(v.abs()));
-                if m > 0.0 {
-                    m
-                } else {
-                    1.0
-                }
-            });
+            let scale = depth_scale(g, d);
             let mut b = Buf::uninit(n);
             if n > 0 {
                 b.par_chunks_mut(stride).zip(d.data().par_chunks(w)).for_each(|(o, src)| {
                     for (o, v) in o.iter_mut().zip(src) {
-                        *o = if v.is_finite() { v / scale } else { 0.0 };
+                        *o = if is_valid_distance(*v) { limit(v / scale) } else { 0.0 };
                     }
                     o[width..].fill(0.0);
                 });
@@ -338,7 +408,7 @@ impl Guides {
                 let mut lo = [f32::INFINITY; 3];
                 let mut hi = [f32::NEG_INFINITY; 3];
                 for (i, px) in p.data().chunks_exact(3).enumerate() {
-                    if surface_px(i) && px.iter().all(|v| v.is_finite()) {
+                    if surface_px(i) {
                         for k in 0..3 {
                             lo[k] = lo[k].min(px[k]);
                             hi[k] = hi[k].max(px[k]);
@@ -368,10 +438,10 @@ impl Guides {
                         for (r, src) in src.chunks_exact(3 * w).enumerate() {
                             let o = r * stride;
                             for (i, px) in src.chunks_exact(3).enumerate() {
-                                let ok = px[0].is_finite() && px[1].is_finite() && px[2].is_finite();
-                                a[o + i] = if ok { px[0] * inv_scale } else { 0.0 };
-                                b[o + i] = if ok { px[1] * inv_scale } else { 0.0 };
-                                c[o + i] = if ok { px[2] * inv_scale } else { 0.0 };
+                                let ok = px.iter().all(|v| is_valid_distance(*v));
+                                a[o + i] = if ok { limit(px[0] * inv_scale) } else { 0.0 };
+                                b[o + i] = if ok { limit(px[1] * inv_scale) } else { 0.0 };
+                                c[o + i] = if ok { limit(px[2] * inv_scale) } else { 0.0 };
                             }
                             for pl in [&mut *a, &mut *b, &mut *c] {
                                 pl[o + width..o + stride].fill(0.0);

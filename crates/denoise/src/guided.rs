@@ -16,16 +16,30 @@
 //!
 //! Background and invalid pixels: window statistics use only surface pixels with a finite
 //! colour (a mask `m` multiplies every sum), windows holding none are skipped in the
-//! averaging, so background never leaks into surfaces. Background pixels are passed through
+//! averaging, so background never leaks into surfaces. Background pixels (zero normal, or a
+//! depth that is not a surface's: [`crate::gbuffer::surface_at`]) are passed through
 //! (non-finite values replaced by 0); surface pixels with an invalid colour get the fit of
 //! their neighbours.
+//!
+//! Bounded output. The linear model is not a convex combination: `q` may leave the range of
+//! the noisy values it was fitted to (overshoot at guide edges, He et al. 2010 §3.4 "gradient
+//! reversal" discussion), and a covariance system spoilt by rounding (huge guide values
+//! before background depths were detected: `-1e6` on a Cycles frame) made it explode. So:
+//! - the depth guide is the depth over its scale clamped to `[0, DEPTH_GUIDE_MAX]`;
+//! - a window whose Cholesky pivot falls below `eps / 2` (impossible in exact arithmetic:
+//!   every pivot of `Sigma + eps U` with `Sigma` positive semi-definite is at least its
+//!   `eps`, the Schur complement being superadditive) or whose coefficients are not finite
+//!   is ill-conditioned by rounding: it falls back to the box mean (`a = 0, b = mean(p)`,
+//!   the `eps -> inf` limit of the same ridge regression);
+//! - every output is clamped to the per-channel range of the fit pixels' colours, so no
+//!   output lies outside what the input holds (tested with huge and NaN guides).
 //!
 //! When to use: smooth indirect illumination at a fixed cost for any radius (Bauszat uses
 //! radius 24-32, eps 0.01 for normals and 0.01-0.03 for depth). Edges that the guidance does
 //! not show (shadows, texture) are smoothed away: filter demodulated illumination.
 
 use crate::error::{invalid, DenoiseError};
-use crate::gbuffer::{check_color, is_surface, GBuffer};
+use crate::gbuffer::{check_color, depth_scale, is_valid_color, surface_at, GBuffer};
 use crate::pool::Buf;
 use crate::simd::Isa;
 use crate::stripbox::{strip_box_sums, vadd, vecs, vecs_mut, vmul, vsub, StripPass, Strips, S, V};
@@ -187,6 +201,11 @@ const fn k2(d: usize) -> usize {
     4 + 3 * d
 }
 
+/// The depth guide `depth / scale` is clamped to `[0, DEPTH_GUIDE_MAX]`: everything beyond
+/// 4 depth scales is "far" alike, and the running sums of its squares stay small enough for
+/// f32 (the scale is the 99th percentile of surface depths, so few pixels reach it).
+const DEPTH_GUIDE_MAX: f32 = 4.0;
+
 /// Planes of [`Inputs`] after the `D` guidance planes.
 const P_COLOR: usize = 0;
 const P_MASK: usize = 3;
@@ -210,26 +229,9 @@ impl<const D: usize> Inputs<D> {
         let (w, len) = (st.w, st.len);
         let row = Self::PLANES * len * S;
         let mut data = Buf::uninit(st.h * row);
-        // Depth divided by the depth scale, as `Guides` does (scene scale, else the largest
-        // surface depth).
-        let depth = g.depth.as_ref().filter(|_| D == 4).map(|d| {
-            let scale = g.scene_scale.unwrap_or_else(|| {
-                let normals = g.normal.data().chunks_exact(3);
-                let m = d
-                    .data()
-                    .iter()
-                    .zip(normals)
-                    .filter(|(v, n)| is_surface(n) && v.is_finite())
-                    .fold(0.0f32, |m, (v, _)| m.max(v.abs()));
-                if m > 0.0 {
-                    m
-                } else {
-                    1.0
-                }
-            });
-            (d.data(), 1.0 / scale)
-        });
-        let src = Src { c: color.data(), n: g.normal.data(), depth };
+        // Depth divided by the depth scale, as `Guides` does.
+        let depth = g.depth.as_ref().filter(|_| D == 4).map(|d| (d.data(), 1.0 / depth_scale(g, d)));
+        let src = Src { c: color.data(), n: g.normal.data(), g, depth };
         // (`convert_row` writes every lane, padding included: no need to clear `data`.)
         let rows_per_item = (16 * 1024 / w).max(1);
         data.par_chunks_mut(rows_per_item * row).enumerate().for_each(|(item, rows)| {
@@ -240,6 +242,37 @@ impl<const D: usize> Inputs<D> {
         Self { st, data }
     }
 
+    /// Per colour channel, `[min, max]` over the fit pixels (`[0, 0]` when there are none).
+    fn fit_range(&self) -> [[f32; 2]; 3] {
+        let row = Self::PLANES * self.st.len * S;
+        let merge = |a: [[f32; 2]; 3], b: [[f32; 2]; 3]| -> [[f32; 2]; 3] {
+            std::array::from_fn(|c| [a[c][0].min(b[c][0]), a[c][1].max(b[c][1])])
+        };
+        let empty = [[f32::INFINITY, f32::NEG_INFINITY]; 3];
+        let r = self
+            .data
+            .par_chunks(row)
+            .map(|row| {
+                let v = vecs(row);
+                let len = self.st.len;
+                let mut r = empty;
+                for j in 0..len {
+                    let m = v[(D + P_MASK) * len + j];
+                    for c in 0..3 {
+                        let p = v[(D + P_COLOR + c) * len + j];
+                        for l in 0..S {
+                            if m[l] > 0.0 {
+                                r[c] = [r[c][0].min(p[l]), r[c][1].max(p[l])];
+                            }
+                        }
+                    }
+                }
+                r
+            })
+            .reduce(|| empty, merge);
+        r.map(|[lo, hi]| if lo <= hi { [lo, hi] } else { [0.0, 0.0] })
+    }
+
     /// Plane `q` at position `j` of row `y`.
     #[inline(always)]
     fn get(&self, q: usize, y: usize, j: usize) -> V {
@@ -247,10 +280,12 @@ impl<const D: usize> Inputs<D> {
     }
 }
 
-/// The interleaved inputs of [`Inputs::new`]: colour, normal, `(depth, 1 / depth scale)`.
+/// The interleaved inputs of [`Inputs::new`]: colour, normal, the G-buffer (for
+/// [`surface_at`]), `(depth, 1 / depth scale)` when depth guides.
 struct Src<'a> {
     c: &'a [f32],
     n: &'a [f32],
+    g: &'a GBuffer,
     depth: Option<(&'a [f32], f32)>,
 }
 
@@ -265,8 +300,8 @@ fn convert_row<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) 
         for l in 0..st.lanes_in_image(j) {
             let i = y * w + l * len + j;
             let px = &src.n[3 * i..3 * i + 3];
-            // Surface: finite, non-zero normal (`is_surface`), normalised; 0 on background.
-            let surface = is_surface(px);
+            // Surface (`surface_at`: normal set, depth valid): normal normalised; 0 on background.
+            let surface = surface_at(src.g, i);
             let inv =
                 if surface { 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt() } else { 0.0 };
             let nn = if surface { [px[0] * inv, px[1] * inv, px[2] * inv] } else { [0.0; 3] };
@@ -280,10 +315,10 @@ fn convert_row<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) 
             }
             if let Some((d, inv_scale)) = src.depth {
                 let dv = d[i];
-                v[3][l] = if dv.is_finite() { dv * inv_scale } else { 0.0 } - 0.5;
+                v[3][l] = if surface { (dv * inv_scale).clamp(0.0, DEPTH_GUIDE_MAX) } else { 0.0 } - 0.5;
             }
             let cp = &src.c[3 * i..3 * i + 3];
-            let valid = cp[0].is_finite() && cp[1].is_finite() && cp[2].is_finite();
+            let valid = cp.iter().all(|v| is_valid_color(*v));
             for k in 0..3 {
                 v[D + P_COLOR + k][l] = if valid { cp[k] } else { 0.0 };
             }
@@ -341,7 +376,7 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     let pass1 = Pass1::<D> { inputs: &inputs, eps, inside: &inside };
     strip_box_sums::<K1, _>(&st, &mut coef, coef_row, &pass1, isa);
     // Pass 2: average the coefficients over the windows covering each pixel and apply them.
-    let pass2 = Pass2::<D, K2> { inputs: &inputs, coef: &coef, row: coef_row };
+    let pass2 = Pass2::<D, K2> { inputs: &inputs, coef: &coef, row: coef_row, range: inputs.fit_range() };
     strip_box_sums::<K2, _>(&st, out.data_mut(), 3 * w, &pass2, isa);
 }
 
@@ -442,6 +477,8 @@ struct Pass2<'a, const D: usize, const K2: usize> {
     coef: &'a [f32],
     /// Values per coefficient row.
     row: usize,
+    /// Per channel, `[min, max]` of the fit pixels' colours: outputs are clamped to it.
+    range: [[f32; 2]; 3],
 }
 
 impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
@@ -462,8 +499,9 @@ impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
         }
     }
 
-    /// `q_i = mean(a) . I_i + mean(b)` over the windows that hold fit pixels; background
-    /// (or an isolated invalid pixel) passes the sanitised input through.
+    /// `q_i = mean(a) . I_i + mean(b)` over the windows that hold fit pixels, clamped to the
+    /// fit range; background (or an isolated invalid pixel) passes the sanitised input
+    /// through.
     #[inline(always)]
     fn consume(&self, y: usize, j: usize, s: &[V; K2], out_row: &mut [f32]) {
         let inp = self.inputs;
@@ -484,7 +522,10 @@ impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
                 v = vadd(v, vmul(s[1 + a * 3 + c], guide[a]));
             }
             let v = vmul(v, inv);
-            q[c] = std::array::from_fn(|l| if fit[l] { v[l] } else { p[l] });
+            let [lo, hi] = self.range[c];
+            // (`max(lo).min(hi)` maps NaN to `hi`; `!is_finite` catches it first.)
+            let v: V = v.map(|v| if v.is_finite() { v.max(lo).min(hi) } else { f32::NAN });
+            q[c] = std::array::from_fn(|l| if fit[l] && !v[l].is_nan() { v[l] } else { p[l] });
         }
         for l in 0..st.lanes_in_image(j) {
             let x = l * st.len + j;
@@ -507,7 +548,6 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
                      // `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
     let fms = |c: V, a: V, b: V| -> V { vsub(c, vmul(a, b)) };
     let n = s[0];
-    let ok: [bool; S] = std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0);
     let inv: V = n.map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });
     let mut mi = [[0.0f32; S]; D];
     for a in 0..D {
@@ -531,6 +571,9 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
     for c in 0..3 {
         mp[c] = vmul(s[kp + c], inv);
     }
+    // A window counts when it holds fit pixels, is centred inside and its mean is finite.
+    let ok: [bool; S] =
+        std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0 && (0..3).all(|c| mp[c][l].is_finite()));
     // cov_k(I, p)
     let mut cov = [[[0.0f32; S]; 3]; D];
     for a in 0..D {
@@ -539,12 +582,17 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
         }
     }
     // Cholesky Sigma = L L^T (SPD: the diagonal holds at least eps > 0); rl = 1 / L_jj.
+    // `well`: every pivot at least eps / 2 (see the module docs), else the box mean.
+    let mut well = [true; S];
     let mut lm = [[[0.0f32; S]; D]; D];
     let mut rl = [[0.0f32; S]; D];
     for j in 0..D {
         let mut d = sig[j][j];
         for k in 0..j {
             d = fms(d, lm[j][k], lm[j][k]);
+        }
+        for l in 0..S {
+            well[l] &= d[l] >= 0.5 * eps[j];
         }
         let floor = 1e-12 + eps[j] * 1e-6;
         rl[j] = d.map(|v| 1.0 / v.max(floor).sqrt());
@@ -556,8 +604,8 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
             lm[i][j] = vmul(v, rl[j]);
         }
     }
-    let zero_if_out = |v: V| -> V { std::array::from_fn(|l| if ok[l] { v[l] } else { 0.0 }) };
-    o[0] = std::array::from_fn(|l| if ok[l] { 1.0 } else { 0.0 });
+    let mut a_all = [[[0.0f32; S]; D]; 3];
+    let mut b_all = [[0.0f32; S]; 3];
     for c in 0..3 {
         // L y = cov_c, then L^T a = y.
         let mut y = [[0.0f32; S]; D];
@@ -578,10 +626,31 @@ fn solve_lanes<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D], ins
         }
         let mut b = mp[c];
         for i in 0..D {
-            o[1 + i * 3 + c] = zero_if_out(a[i]);
             b = fms(b, a[i], mi[i]);
         }
-        o[1 + 3 * D + c] = zero_if_out(b);
+        for l in 0..S {
+            well[l] &= b[l].is_finite() && a.iter().all(|a| a[l].is_finite());
+        }
+        (a_all[c], b_all[c]) = (a, b);
+    }
+    // Out: zeros; ill-conditioned: the box mean (a = 0, b = mean p).
+    let pick = |v: V, fallback: V| -> V {
+        std::array::from_fn(|l| {
+            if !ok[l] {
+                0.0
+            } else if well[l] {
+                v[l]
+            } else {
+                fallback[l]
+            }
+        })
+    };
+    o[0] = std::array::from_fn(|l| if ok[l] { 1.0 } else { 0.0 });
+    for c in 0..3 {
+        for i in 0..D {
+            o[1 + i * 3 + c] = pick(a_all[c][i], [0.0; S]);
+        }
+        o[1 + 3 * D + c] = pick(b_all[c], mp[c]);
     }
 }
 
@@ -596,6 +665,7 @@ fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], 
     if n < 0.5 {
         return;
     }
+    let mut well = true;
     let inv = 1.0 / n;
     let mut mi = [0.0f32; D];
     for a in 0..D {
@@ -615,6 +685,9 @@ fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], 
         sig[a][a] = sig[a][a].max(0.0) + eps[a];
     }
     let mp = [s[kp] * inv, s[kp + 1] * inv, s[kp + 2] * inv];
+    if !mp.iter().all(|v| v.is_finite()) {
+        return;
+    }
     let mut cov = [[0.0f32; 3]; D];
     for a in 0..D {
         for c in 0..3 {
@@ -628,6 +701,7 @@ fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], 
         for k in 0..j {
             d -= l[j][k] * l[j][k];
         }
+        well &= d >= 0.5 * eps[j];
         rl[j] = 1.0 / d.max(1e-12 + eps[j] * 1e-6).sqrt();
         for i in j + 1..D {
             let mut v = sig[i][j];
@@ -637,7 +711,7 @@ fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], 
             l[i][j] = v * rl[j];
         }
     }
-    o[0] = 1.0;
+    let mut ab = [([0.0f32; D], 0.0f32); 3];
     for c in 0..3 {
         let mut y = [0.0f32; D];
         for i in 0..D {
@@ -657,16 +731,63 @@ fn solve_window<const D: usize, const K1: usize>(s: &[f32; K1], eps: &[f32; D], 
         }
         let mut b = mp[c];
         for i in 0..D {
-            o[1 + i * 3 + c] = a[i];
             b -= a[i] * mi[i];
         }
-        o[1 + 3 * D + c] = b;
+        well &= b.is_finite() && a.iter().all(|a| a.is_finite());
+        ab[c] = (a, b);
+    }
+    o[0] = 1.0;
+    for (c, (a, b)) in ab.into_iter().enumerate() {
+        for i in 0..D {
+            o[1 + i * 3 + c] = if well { a[i] } else { 0.0 };
+        }
+        o[1 + 3 * D + c] = if well { b } else { mp[c] };
     }
 }
 
 #[cfg(test)]
 mod lane_tests {
     use super::*;
+
+    /// A window whose sums are spoilt by rounding (a computed `Sigma` that is not positive
+    /// semi-definite, or sums that overflowed) falls back to the box mean `a = 0`,
+    /// `b = mean(p)`, or is skipped when even the mean is not finite; lanes and the scalar
+    /// solve agree bit for bit.
+    #[test]
+    fn ill_conditioned_windows_fall_back_to_the_box_mean() {
+        const D: usize = 4;
+        const K1: usize = k1(D);
+        let kp = 1 + D + D * (D + 1) / 2;
+        let eps = [0.01, 0.01, 0.01, 0.02];
+        let mut sums = [[0.0f32; K1]; S];
+        for (l, s) in sums.iter_mut().enumerate() {
+            s[0] = 10.0;
+            // Mean guide 0.5 but mean square ~0: variance -0.25 (impossible).
+            s[1..1 + D].fill(5.0);
+            // Off-diagonal `I_0 I_1` sums huge: an indefinite Sigma.
+            s[1 + D + 1] = 1e6 * l as f32;
+            s[kp..kp + 3].copy_from_slice(&[3.0, 4.0, 5.0]);
+            s[kp + 3..].fill(1e5);
+            if l == 5 {
+                s[kp] = f32::INFINITY; // an overflowed colour sum: window skipped
+            }
+        }
+        let lanes: [V; K1] = std::array::from_fn(|k| std::array::from_fn(|l| sums[l][k]));
+        let mut o = [[7.0f32; S]; k2(D)];
+        solve_lanes::<D, K1>(&lanes, &eps, &[1.0; S], &mut o);
+        for l in 0..S {
+            let mut one = [7.0f32; k2(D)];
+            solve_window::<D, K1>(&sums[l], &eps, &mut one);
+            let got: Vec<f32> = o.iter().map(|v| v[l]).collect();
+            assert_eq!(got, one, "lane {l}");
+            let want: Vec<f32> = if l == 5 {
+                vec![0.0; k2(D)]
+            } else {
+                [1.0].into_iter().chain([0.0; 3 * D]).chain([0.3, 0.4, 0.5]).collect()
+            };
+            assert_eq!(got, want, "lane {l}");
+        }
+    }
 
     /// The 16-lane solve is bit-identical to the per-window solve, empty windows and windows
     /// centred outside the image included.

@@ -131,7 +131,7 @@ impl Filter {
         {
             if black(a) {
                 for (o, c) in o.iter_mut().zip(c) {
-                    *o = if c.is_finite() { *c } else { 0.0 };
+                    *o = if gbuffer::is_valid_color(*c) { *c } else { 0.0 };
                 }
             }
         }

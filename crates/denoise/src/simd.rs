@@ -4,6 +4,7 @@
 //! The hot loops are written once as `#[inline(always)]` generic functions over planar
 //! `f32` slices; [`dispatch!`] calls them through a `#[target_feature(enable = "avx2,fma")]`
 //! wrapper when the CPU has AVX2 (8 lanes), else through the baseline (SSE2, 4 lanes) build.
+//! [`with_isa`] narrows the build on one thread, so tests check every build on any machine.
 
 /// `exp(-x)` for `x >= 0` (clamped to `[0, 87]`), relative error below 5e-6 (for large `x`
 /// dominated by the f32 rounding of `x * log2(e)`; below 3e-7 for `x < 1`).
@@ -104,9 +105,21 @@ pub enum Isa {
     Base,
 }
 
-/// The widest instruction set of the hot loops this CPU runs.
+/// The instruction set the hot loops run with: the widest this CPU runs, narrowed on the
+/// calling thread by [`with_isa`]. Every filter reads it once, on the calling thread,
+/// before it hands rows to worker threads.
 #[inline]
 pub fn isa() -> Isa {
+    let cpu = cpu_isa();
+    match ISA_CAP.with(|c| c.get()) {
+        Some(cap) if cap.lanes() < cpu.lanes() => cap,
+        _ => cpu,
+    }
+}
+
+/// The widest instruction set of the hot loops this CPU runs.
+#[inline]
+pub fn cpu_isa() -> Isa {
     #[cfg(target_arch = "x86_64")]
     {
         if std::is_x86_feature_detected!("avx512f") && has_avx2() {
@@ -118,6 +131,41 @@ pub fn isa() -> Isa {
     } else {
         Isa::Base
     }
+}
+
+impl Isa {
+    /// f32 lanes of one vector.
+    pub fn lanes(self) -> usize {
+        match self {
+            Self::Avx512 => 16,
+            Self::Avx2 => 8,
+            Self::Base => 4,
+        }
+    }
+
+    /// Every build this CPU runs, widest first (tests run each against the naive filters).
+    pub fn supported() -> Vec<Isa> {
+        let cpu = cpu_isa();
+        [Isa::Avx512, Isa::Avx2, Isa::Base].into_iter().filter(|i| i.lanes() <= cpu.lanes()).collect()
+    }
+}
+
+thread_local! {
+    static ISA_CAP: std::cell::Cell<Option<Isa>> = const { std::cell::Cell::new(None) };
+}
+
+/// Runs `f` with the filters' builds narrowed to at most `cap` on this thread (a wider `cap`
+/// than the CPU runs changes nothing: never unsafe). For tests and benchmarks that compare
+/// the builds on one machine; the previous cap is restored afterwards, also on a panic.
+pub fn with_isa<R>(cap: Isa, f: impl FnOnce() -> R) -> R {
+    struct Restore(Option<Isa>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            ISA_CAP.with(|c| c.set(self.0));
+        }
+    }
+    let _restore = Restore(ISA_CAP.with(|c| c.replace(Some(cap))));
+    f()
 }
 
 /// True when the AVX2 build of the hot loops may run on this CPU.

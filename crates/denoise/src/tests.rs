@@ -140,8 +140,38 @@ fn assert_close(got: &Image, want: &[f64], tol: f64, what: &str) {
     assert!(worst.0 <= tol, "{what}: worst error {} at value {} (want {})", worst.0, worst.1, want[worst.1]);
 }
 
+/// Runs `f` once per build of the hot loops this CPU runs (AVX-512, AVX2, baseline), the
+/// build forced by [`crate::simd::with_isa`]; `f` gets the build's name for its messages.
+fn for_every_build(f: impl Fn(&str)) {
+    let builds = crate::simd::Isa::supported();
+    assert!(builds.contains(&crate::simd::Isa::Base));
+    for isa in builds {
+        crate::simd::with_isa(isa, || {
+            assert_eq!(crate::simd::isa(), isa, "the forced build is the one that runs");
+            f(&format!("{isa:?}"))
+        });
+    }
+}
+
+#[test]
+fn with_isa_narrows_and_restores_the_build() {
+    use crate::simd::{cpu_isa, isa, with_isa, Isa};
+    assert_eq!(isa(), cpu_isa());
+    with_isa(Isa::Base, || {
+        assert_eq!(isa(), Isa::Base);
+        // A wider cap never widens past what was forced, nor past the CPU.
+        with_isa(Isa::Avx512, || assert_eq!(isa(), cpu_isa()));
+        assert_eq!(isa(), Isa::Base);
+    });
+    assert_eq!(isa(), cpu_isa());
+}
+
 #[test]
 fn atrous_matches_naive() {
+    for_every_build(atrous_matches_naive_on);
+}
+
+fn atrous_matches_naive_on(build: &str) {
     let mut rng = Rng::new(1);
     let (w, h) = (37, 29);
     let g = random_gbuffer(w, h, &mut rng, true);
@@ -160,7 +190,7 @@ fn atrous_matches_naive() {
     for (name, p) in cases {
         let fast = atrous(&color, &g, &p).unwrap();
         let naive = naive_atrous(&color, &g, &p);
-        assert_close(&fast, &naive, 2e-4, &name);
+        assert_close(&fast, &naive, 2e-4, &format!("{build}: {name}"));
     }
 }
 
@@ -169,6 +199,10 @@ fn atrous_matches_naive() {
 /// invalid colours and every weight subset. Only the summation order differs.
 #[test]
 fn symmetric_level_matches_direct_pass() {
+    for_every_build(symmetric_level_matches_direct_pass_on);
+}
+
+fn symmetric_level_matches_direct_pass_on(build: &str) {
     use crate::atrous::{atrous_step, atrous_step_direct};
     use crate::gbuffer::{to_planes, Guides};
     let mut rng = Rng::new(11);
@@ -204,7 +238,7 @@ fn symmetric_level_matches_direct_pass() {
                         }
                         assert!(
                             (a - b).abs() <= 2e-6 * (1.0 + b.abs()),
-                            "{w}x{h} level {i} {p:?}: pixel {k} channel {c}: {a} vs {b}"
+                            "{build}: {w}x{h} level {i} {p:?}: pixel {k} channel {c}: {a} vs {b}"
                         );
                     }
                 }
@@ -288,6 +322,10 @@ fn to_planes_valid_matches_to_planes_strided() {
 
 #[test]
 fn bilateral_matches_naive() {
+    for_every_build(bilateral_matches_naive_on);
+}
+
+fn bilateral_matches_naive_on(build: &str) {
     let mut rng = Rng::new(2);
     let (w, h) = (23, 19);
     let g = random_gbuffer(w, h, &mut rng, true);
@@ -318,7 +356,7 @@ fn bilateral_matches_naive() {
         let c: Vec<f64> = color.data().iter().map(|v| *v as f64).collect();
         let naive =
             naive_pass(&c, &g, &taps, (inv(p.sigma_color), inv(p.sigma_normal), inv(p.sigma_position)));
-        assert_close(&fast, &naive, 2e-4, &format!("{p:?}"));
+        assert_close(&fast, &naive, 2e-4, &format!("{build}: {p:?}"));
     }
 }
 
@@ -426,13 +464,19 @@ fn naive_guided(color: &Image, g: &GBuffer, p: &GuidedParams) -> Vec<f64> {
             }
         }
     }
+    // Clamped to the fit pixels' range (guided.rs, "Bounded output").
+    let fit_px: Vec<usize> = (0..w * h).filter(|&i| surface(g, i)).collect();
+    let lo = |c: usize| fit_px.iter().map(|&i| color.data()[i * 3 + c] as f64).fold(f64::INFINITY, f64::min);
+    let hi =
+        |c: usize| fit_px.iter().map(|&i| color.data()[i * 3 + c] as f64).fold(f64::NEG_INFINITY, f64::max);
     let mut out = vec![0.0; w * h * 3];
     for i in 0..w * h {
         for c in 0..3 {
             out[i * 3 + c] = if surface(g, i) && cnt[i] > 0.0 {
                 let gi = guide(i);
                 let s = &acc[i * (3 * d + 3)..];
-                ((0..d).map(|a| s[a * 3 + c] * gi[a]).sum::<f64>() + s[3 * d + c]) / cnt[i]
+                let q = ((0..d).map(|a| s[a * 3 + c] * gi[a]).sum::<f64>() + s[3 * d + c]) / cnt[i];
+                q.clamp(lo(c), hi(c))
             } else {
                 color.data()[i * 3 + c] as f64
             };
@@ -443,6 +487,10 @@ fn naive_guided(color: &Image, g: &GBuffer, p: &GuidedParams) -> Vec<f64> {
 
 #[test]
 fn guided_matches_per_window_least_squares() {
+    for_every_build(guided_matches_per_window_least_squares_on);
+}
+
+fn guided_matches_per_window_least_squares_on(build: &str) {
     let mut rng = Rng::new(3);
     let (w, h) = (26, 21);
     let g = random_gbuffer(w, h, &mut rng, true);
@@ -454,7 +502,7 @@ fn guided_matches_per_window_least_squares() {
             let p = GuidedParams { radius, guidance, eps_normal, eps_depth };
             let fast = guided(&color, &g, &p).unwrap();
             let naive = naive_guided(&color, &g, &p);
-            assert_close(&fast, &naive, 2e-3, &format!("{p:?}"));
+            assert_close(&fast, &naive, 2e-3, &format!("{build}: {p:?}"));
         }
     }
 }
@@ -755,4 +803,114 @@ fn underflowing_weight_sums_stay_finite() {
         sigma_position: None,
     };
     assert_eq!(bilateral(&color, &g, &b).unwrap().count_non_finite(), 0);
+}
+
+/// Cycles' AOVs: depth `1e10` where rays escape, also on edge pixels whose normal is set.
+/// Those pixels are background, the depth scale comes from the surfaces (not 1e10), and the
+/// guided filter's output stays finite and inside the input's range, with the scale
+/// estimated and with Blender's explicit scene scale (before the fix: 1.4e10 here, -1e6 on
+/// the Cycles frame).
+#[test]
+fn cycles_escaped_ray_depth_is_background_and_outputs_stay_in_range() {
+    // A sphere (with its ring of edge pixels) above a floor that starts a window's height
+    // below it: the floor's windows see the running sums after the ring's huge depths.
+    let (w, h) = (96, 128);
+    let mut rng = Rng::new(17);
+    let (mut n, mut d, mut c) = (Vec::new(), Vec::new(), Vec::new());
+    for y in 0..h {
+        for x in 0..w {
+            let r2 = (x as i32 - 30).pow(2) + (y as i32 - 24).pow(2);
+            let inside = r2 < 400 || y >= 80;
+            let edge = !inside && r2 < 480;
+            let normal = if inside || edge { [0.3, 0.2, 0.93] } else { [0.0; 3] };
+            n.extend_from_slice(&normal);
+            d.push(if inside { 10.0 + 0.1 * x as f32 + rng.f32() } else { 1e10 });
+            // Edge pixels mix surface and sky: noisy like the surface.
+            let v = if inside || edge { 2.0 * rng.f32() } else { 0.6 };
+            c.extend_from_slice(&[v, 0.5 * v, 0.6]);
+        }
+    }
+    let color = Image::from_vec(w, h, 3, c).unwrap();
+    let g =
+        GBuffer::new(Image::from_vec(w, h, 3, n).unwrap()).with_depth(Image::from_vec(w, h, 1, d).unwrap());
+    let scale = crate::gbuffer::depth_scale(&g, g.depth.as_ref().unwrap());
+    assert!((10.0..25.0).contains(&scale), "depth scale {scale} comes from surfaces only");
+    for scene_scale in [None, Some(16.75)] {
+        let g = GBuffer { scene_scale, ..g.clone() };
+        for (name, f) in all_filters() {
+            let Ok(out) = f.apply(&color, &g) else { continue }; // (presets needing a position)
+            for (i, (o, c)) in out.data().iter().zip(color.data()).enumerate() {
+                assert!(o.is_finite() && (0.0..=2.0).contains(o), "{name} {scene_scale:?}: value {i} = {o}");
+                // The guided filter passes background (edge pixels included) through.
+                if name.starts_with("guided") && !crate::gbuffer::surface_at(&g, i / 3) {
+                    assert_eq!(o, c, "{name} {scene_scale:?}: background {i}");
+                }
+            }
+        }
+    }
+}
+
+/// The per-channel `[lo, hi]` of the valid input colours, widened to 0 when some value is
+/// invalid (a pixel without any valid neighbour in reach is 0: no data).
+fn valid_range(color: &Image) -> [[f32; 2]; 3] {
+    let mut r = [[f32::INFINITY, f32::NEG_INFINITY]; 3];
+    let mut invalid = false;
+    for px in color.data().chunks_exact(3) {
+        if px.iter().all(|v| crate::gbuffer::is_valid_color(*v)) {
+            for c in 0..3 {
+                r[c] = [r[c][0].min(px[c]), r[c][1].max(px[c])];
+            }
+        } else {
+            invalid = true;
+        }
+    }
+    r.map(|[lo, hi]| if invalid || lo > hi { [lo.min(0.0), hi.max(0.0)] } else { [lo, hi] })
+}
+
+mod bounded {
+    use super::*;
+    use proptest::prelude::*;
+
+    const SPECIALS: [f32; 7] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3e38, -3e38, 1e10, 1e-30];
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+        /// Every filter (every preset, with and without a scene scale), on random inputs
+        /// whose colours and guides hold NaN, infinities, `3e38` and Cycles' `1e10`: the
+        /// output is finite and inside the range of the valid input colours (up to the
+        /// weights' rounding).
+        #[test]
+        fn every_filter_output_is_finite_and_within_the_input_range(
+            w in 1usize..14, h in 1usize..11, seed in any::<u64>(),
+            specials in prop::collection::vec((0usize..1000, 0usize..4, 0usize..7), 0..12),
+            scale in prop::option::of(prop::sample::select(vec![1e-3f32, 1.0, 16.75, 1e8])),
+        ) {
+            let mut rng = super::Rng::new(seed);
+            let mut g = random_gbuffer(w, h, &mut rng, true);
+            g.scene_scale = scale;
+            let mut color = Image::from_vec(w, h, 3, (0..w * h * 3).map(|_| 4.0 * rng.f32() - 1.0).collect()).unwrap();
+            for (at, buffer, kind) in specials {
+                let v = SPECIALS[kind];
+                let im = match buffer {
+                    0 => &mut color,
+                    1 => &mut g.normal,
+                    2 => g.position.as_mut().unwrap(),
+                    _ => g.depth.as_mut().unwrap(),
+                };
+                let k = at % im.data().len();
+                im.data_mut()[k] = v;
+            }
+            let range = valid_range(&color);
+            for (name, f) in all_filters() {
+                let out = f.apply(&color, &g).unwrap();
+                for (i, o) in out.data().iter().enumerate() {
+                    let [lo, hi] = range[i % 3];
+                    let tol = 1e-5 * lo.abs().max(hi.abs());
+                    prop_assert!(o.is_finite() && *o >= lo - tol && *o <= hi + tol,
+                        "{}: value {} = {} outside [{}, {}]", name, i, o, lo, hi);
+                }
+            }
+        }
+    }
 }

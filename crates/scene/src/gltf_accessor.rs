@@ -16,14 +16,18 @@ use crate::types::{MaterialId, Mesh};
 
 /// What an accessor may hold, per the glTF 2.0 specification (section 3.7.2.1).
 #[derive(Clone, Copy)]
-enum Kind {
+pub(crate) enum Kind {
     Indices,
     Vec3F32,
     TexCoord,
+    /// Animation key times.
+    ScalarF32,
+    /// Animation rotation keys: floats or normalised integers.
+    Rotation,
 }
 
 /// Checks that `acc` (used as `what`) has an allowed type and lies inside its data.
-fn check_accessor(
+pub(crate) fn check_accessor(
     acc: &gltf::Accessor,
     buffers: &[gltf::buffer::Data],
     what: &str,
@@ -39,6 +43,11 @@ fn check_accessor(
         Kind::TexCoord => {
             dims == Dimensions::Vec2
                 && (ty == DataType::F32 || (acc.normalized() && matches!(ty, DataType::U8 | DataType::U16)))
+        }
+        Kind::ScalarF32 => dims == Dimensions::Scalar && ty == DataType::F32,
+        Kind::Rotation => {
+            let ints = matches!(ty, DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16);
+            dims == Dimensions::Vec4 && (ty == DataType::F32 || (acc.normalized() && ints))
         }
     };
     if !type_ok {

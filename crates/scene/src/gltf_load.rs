@@ -34,6 +34,7 @@ use filtrace_core::{Affine3A, Mat4, Rgb, Vec3};
 
 use crate::error::SceneError;
 use crate::gltf_accessor::read_primitive;
+use crate::gltf_anim::{read_animation, VisitedNode};
 use crate::texture::srgb_to_linear;
 use crate::types::{
     Bsdf, Camera, Instance, Light, Material, MaterialId, MeshId, Scene, Texturable, Texture, TextureId,
@@ -79,8 +80,12 @@ pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
         return Err(SceneError::parse(path, None, "glTF file has no scene"));
     };
     check_node_trees(&doc).map_err(|m| SceneError::parse(path, None, m))?;
-    walk_nodes(&gscene, &prims, ctx.scene, MAX_GLTF_INSTANCES)
+    let visited = walk_nodes(&gscene, &prims, ctx.scene, MAX_GLTF_INSTANCES)
         .map_err(|m| SceneError::parse(path, None, m))?;
+    let mut warnings = Vec::new();
+    scene.animation = read_animation(&doc, &buffers, &visited, &mut warnings)
+        .map_err(|m| SceneError::parse(path, None, m))?;
+    scene.stats.warnings.extend(warnings.into_iter().map(|w| format!("{}: {w}", path.display())));
     Ok(scene)
 }
 
@@ -191,17 +196,19 @@ fn check_node_trees(doc: &gltf::Document) -> Result<(), String> {
 }
 
 /// Places the scene's nodes depth first (instances, lights, the first perspective camera).
-/// At most `max_instances` instances.
+/// At most `max_instances` instances. Returns the nodes in walk order, for animation.
 fn walk_nodes(
     gscene: &gltf::Scene,
     prims: &[Vec<MeshId>],
     scene: &mut Scene,
     max_instances: usize,
-) -> Result<(), String> {
+) -> Result<Vec<VisitedNode>, String> {
     let mut visited = vec![false; gscene.nodes().map(|n| n.index() + 1).max().unwrap_or(0)];
-    let mut stack: Vec<(gltf::Node, Mat4)> = gscene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut walk: Vec<VisitedNode> = Vec::new();
+    let mut stack: Vec<(gltf::Node, Mat4, Option<u32>)> =
+        gscene.nodes().map(|n| (n, Mat4::IDENTITY, None)).collect();
     stack.reverse();
-    while let Some((node, parent)) = stack.pop() {
+    while let Some((node, parent, parent_walk)) = stack.pop() {
         let i = node.index();
         if i >= visited.len() {
             visited.resize(i + 1, false);
@@ -213,31 +220,45 @@ fn walk_nodes(
                 gscene.index()
             ));
         }
-        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local;
         if !world.is_finite() {
             return Err(format!("{} has a non-finite transform", node_label(&node)));
         }
         let affine = Affine3A::from_mat4(world);
+        let mut here = VisitedNode {
+            gltf_index: i,
+            parent: parent_walk,
+            local: Affine3A::from_mat4(local),
+            instances: Vec::new(),
+            lights: Vec::new(),
+            camera: None,
+        };
         if let Some(mesh) = node.mesh() {
             let ids = &prims[mesh.index()];
             if scene.instances.len() + ids.len() > max_instances {
                 return Err(format!("more than {max_instances} instances (at {})", node_label(&node)));
             }
             for &id in ids {
+                here.instances.push(scene.instances.len() as u32);
                 scene.instances.push(Instance { mesh: id, transform: affine, material_override: None });
             }
         }
         if let Some(light) = node.light() {
+            here.lights.push((scene.lights.len() as u32, convert_light(&light, &Affine3A::IDENTITY)));
             scene.lights.push(convert_light(&light, &affine));
         }
         if let (Some(cam), None) = (node.camera(), &scene.camera) {
             scene.camera = convert_camera(&cam, &affine)?;
+            here.camera = convert_camera(&cam, &Affine3A::IDENTITY)?.filter(|_| scene.camera.is_some());
         }
-        let mut children: Vec<_> = node.children().map(|c| (c, world)).collect();
+        let me = Some(walk.len() as u32);
+        walk.push(here);
+        let mut children: Vec<_> = node.children().map(|c| (c, world, me)).collect();
         children.reverse();
         stack.extend(children);
     }
-    Ok(())
+    Ok(walk)
 }
 
 /// A perspective camera at the node (looking along its -Z, up +Y); `None` for orthographic

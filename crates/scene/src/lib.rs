@@ -19,6 +19,7 @@ pub mod dedup;
 pub mod default_light;
 pub mod error;
 mod gltf_accessor;
+pub mod gltf_anim;
 pub mod gltf_load;
 pub mod load;
 pub mod obj;

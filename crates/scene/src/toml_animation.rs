@@ -26,8 +26,8 @@ use serde::Deserialize;
 use toml::{Spanned, Value};
 
 use crate::animation::{
-    normalized_rotations, CameraTrack, Clock, Interpolation, Keyable, LightTrack, ObjectTrack,
-    SceneAnimation, Track, TrackError, TransformTrack,
+    normalized_rotations, AnimNode, CameraTrack, Clock, Interpolation, Keyable, LightTrack, SceneAnimation,
+    Track, TrackError, TransformTrack,
 };
 use crate::error::{line_of, SceneError};
 use crate::types::{Camera, Light};
@@ -98,15 +98,12 @@ pub(crate) fn build_animation(
     let def = anim.get_ref();
     let clock = Clock::new(def.fps, def.frames[0], def.frames[1])
         .map_err(|e| p.err(anim.span(), format!("animation: {e}")))?;
-    let mut builder = AnimationBuilder { p, clock, targets, anim: empty(clock), objects: HashMap::new() };
+    let mut builder =
+        AnimationBuilder { p, clock, targets, anim: SceneAnimation::new(clock), objects: HashMap::new() };
     for track in tracks {
         builder.track(track)?;
     }
     Ok(Some(builder.anim))
-}
-
-fn empty(clock: Clock) -> SceneAnimation {
-    SceneAnimation { clock, camera: None, objects: Vec::new(), lights: Vec::new() }
 }
 
 struct Parser<'a> {
@@ -125,7 +122,7 @@ struct AnimationBuilder<'a> {
     clock: Clock,
     targets: &'a Targets<'a>,
     anim: SceneAnimation,
-    /// Index into `anim.objects` by object name.
+    /// Index into `anim.nodes` by object name.
     objects: HashMap<String, usize>,
 }
 
@@ -220,16 +217,11 @@ impl AnimationBuilder<'_> {
         object: &ObjectTarget,
         property: &str,
     ) -> Result<(), SceneError> {
-        let index = *self.objects.entry(name.to_string()).or_insert_with(|| {
-            self.anim.objects.push(ObjectTrack {
-                name: name.to_string(),
-                track: TransformTrack::at_rest(&object.transform),
-                instances: object.instances.clone(),
-                lights: object.lights.clone(),
-            });
-            self.anim.objects.len() - 1
-        });
-        let track = &mut self.anim.objects[index].track;
+        let index = match self.objects.get(name) {
+            Some(&index) => index,
+            None => self.add_object_node(name, object),
+        };
+        let track = &mut self.anim.nodes[index].track;
         let p = &self.p;
         match property {
             "translate" if track.translation.is_none() => {
@@ -241,6 +233,18 @@ impl AnimationBuilder<'_> {
             other => return Err(ctx.unknown_property(p, other, "object")),
         }
         Ok(())
+    }
+
+    /// A root node for a named object, carrying its instances and its mesh file's lights.
+    fn add_object_node(&mut self, name: &str, object: &ObjectTarget) -> usize {
+        let node = self.anim.nodes.len();
+        let track = TransformTrack::at_rest(&object.transform);
+        self.anim.nodes.push(AnimNode { name: name.to_string(), parent: None, track });
+        let n = node as u32;
+        self.anim.instances.extend(object.instances.iter().map(|&(i, local)| (i, n, local)));
+        self.anim.node_lights.extend(object.lights.iter().map(|(i, l)| (*i, n, l.clone())));
+        self.objects.insert(name.to_string(), node);
+        node
     }
 
     fn light_track(

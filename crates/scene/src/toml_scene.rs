@@ -577,6 +577,13 @@ impl Builder<'_> {
         }
         self.scene.stats.degenerate_triangles_skipped += sub.stats.degenerate_triangles_skipped;
         self.scene.stats.warnings.extend(sub.stats.warnings);
+        if sub.animation.is_some() {
+            let w = format!(
+                "{}: the mesh file's animation is ignored (animate the object with [[tracks]])",
+                sub.name
+            );
+            self.scene.stats.warnings.push(w);
+        }
         let instances = sub
             .instances
             .into_iter()

@@ -133,6 +133,18 @@ pub enum Light {
     Environment(Environment),
 }
 
+impl Camera {
+    /// This camera placed by `m` (eye and target moved, up turned).
+    pub fn transformed(&self, m: &Affine3A) -> Camera {
+        Camera {
+            eye: m.transform_point3(self.eye),
+            target: m.transform_point3(self.target),
+            up: m.transform_vector3(self.up).normalize_or(self.up),
+            vfov_deg: self.vfov_deg,
+        }
+    }
+}
+
 impl Light {
     /// This light placed by `m` (positions moved, directions turned; environments stay).
     pub fn transformed(&self, m: &Affine3A) -> Light {

@@ -11,7 +11,7 @@ mod scene_anim;
 mod track;
 
 pub use rig::{CameraTrack, Clock, ClockError, TransformTrack};
-pub use scene_anim::{LightTrack, ObjectTrack, Pose, SceneAnimation};
+pub use scene_anim::{AnimNode, LightTrack, Pose, SceneAnimation};
 pub use track::{hermite, normalized_rotations, Interpolation, Keyable, Track, TrackError};
 
 #[cfg(test)]

@@ -12,25 +12,33 @@ use crate::types::{Camera, Light, Scene};
 use filtrace_core::{Affine3A, Rgb, Vec3};
 
 /// Everything that moves in a scene, over the frames of its clock.
+///
+/// Moving things hang from a forest of [`AnimNode`]s (a TOML object is a root node; glTF
+/// nodes keep their hierarchy), each instance, light or camera placed relative to its node.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneAnimation {
     pub clock: Clock,
+    /// A camera keyed directly (TOML).
     pub camera: Option<CameraTrack>,
-    pub objects: Vec<ObjectTrack>,
+    /// Transform nodes, parents before children.
+    pub nodes: Vec<AnimNode>,
+    /// Instances moved by a node: (instance, node, transform relative to the node).
+    pub instances: Vec<(u32, u32, Affine3A)>,
+    /// Lights moved by a node: (light, node, the light in the node's space).
+    pub node_lights: Vec<(u32, u32, Light)>,
+    /// A camera carried by a node (glTF): (node, the camera in the node's space).
+    pub node_camera: Option<(u32, Camera)>,
+    /// Lights whose own parameters are keyed (TOML).
     pub lights: Vec<LightTrack>,
 }
 
-/// A named object (a shape, a mesh file's instances, or an area light) moved as one.
+/// A transform node: its transform relative to its parent (or the world) over time.
 #[derive(Clone, Debug, PartialEq)]
-pub struct ObjectTrack {
+pub struct AnimNode {
     pub name: String,
-    /// The object's transform over time (its rest pose is the transform in the file).
+    /// Index into [`SceneAnimation::nodes`], always smaller than this node's own.
+    pub parent: Option<u32>,
     pub track: TransformTrack,
-    /// Instances it places, each with its transform relative to the object (a mesh
-    /// file's own node transforms; the identity for shapes).
-    pub instances: Vec<(u32, Affine3A)>,
-    /// Lights that came with the object's mesh file, in the file's space.
-    pub lights: Vec<(u32, Light)>,
 }
 
 /// A point, spot or directional light whose parameters are keyed.
@@ -57,29 +65,53 @@ pub struct Pose {
 }
 
 impl SceneAnimation {
+    /// An animation of `clock` that moves nothing yet.
+    pub fn new(clock: Clock) -> Self {
+        SceneAnimation {
+            clock,
+            camera: None,
+            nodes: Vec::new(),
+            instances: Vec::new(),
+            node_lights: Vec::new(),
+            node_camera: None,
+            lights: Vec::new(),
+        }
+    }
+
+    /// World transforms of the nodes at time `t` (parents come first, so one pass).
+    pub fn node_transforms(&self, t: f32) -> Vec<Affine3A> {
+        let mut world: Vec<Affine3A> = Vec::with_capacity(self.nodes.len());
+        for node in &self.nodes {
+            let local = node.track.sample(t);
+            world.push(match node.parent {
+                Some(p) => world[p as usize] * local,
+                None => local,
+            });
+        }
+        world
+    }
+
     /// The pose at time `t`, with `rest_lights` the scene's lights in their rest pose.
     pub fn pose(&self, rest_lights: &[Light], t: f32) -> Pose {
-        let mut pose = Pose {
-            time: t,
-            camera: self.camera.as_ref().map(|c| c.sample(t)),
-            instances: Vec::new(),
-            lights: Vec::new(),
-        };
-        for object in &self.objects {
-            let m = object.track.sample(t);
-            pose.instances.extend(object.instances.iter().map(|&(i, local)| (i, m * local)));
-            pose.lights.extend(object.lights.iter().map(|(i, l)| (*i, l.transformed(&m))));
+        let world = self.node_transforms(t);
+        let mut camera = self.camera.as_ref().map(|c| c.sample(t));
+        if let Some((node, local)) = &self.node_camera {
+            camera = Some(local.transformed(&world[*node as usize]));
         }
+        let instances =
+            self.instances.iter().map(|&(i, node, local)| (i, world[node as usize] * local)).collect();
+        let mut lights: Vec<(u32, Light)> =
+            self.node_lights.iter().map(|(i, node, l)| (*i, l.transformed(&world[*node as usize]))).collect();
         for track in &self.lights {
-            pose.lights.push((track.light, track.sample(&rest_lights[track.light as usize], t)));
+            lights.push((track.light, track.sample(&rest_lights[track.light as usize], t)));
         }
-        pose
+        Pose { time: t, camera, instances, lights }
     }
 
     /// Earliest and latest key of every track (`None` when nothing is keyed).
     pub fn key_range(&self) -> Option<(f32, f32)> {
         let camera = self.camera.as_ref().and_then(CameraTrack::time_range);
-        let objects = self.objects.iter().filter_map(|o| o.track.time_range());
+        let objects = self.nodes.iter().filter_map(|n| n.track.time_range());
         let lights = self.lights.iter().filter_map(LightTrack::time_range);
         camera.into_iter().chain(objects).chain(lights).reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)))
     }

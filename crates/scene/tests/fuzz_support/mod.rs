@@ -163,11 +163,11 @@ pub enum Mutation {
 pub fn mutation() -> impl Strategy<Value = Mutation> {
     let p = any::<usize>();
     prop_oneof![
-        2 => (p.clone(), any::<u8>()).prop_map(|(pos, byte)| Mutation::Flip { pos, byte }),
-        1 => p.clone().prop_map(|pos| Mutation::Truncate { pos }),
-        1 => (p.clone(), 1usize..64, p.clone()).prop_map(|(from, len, to)| Mutation::Splice { from, len, to }),
-        1 => (p.clone(), 1usize..32).prop_map(|(pos, len)| Mutation::Delete { pos, len }),
-        4 => (p.clone(), 0..EXTREME_NUMBERS.len()).prop_map(|(k, value)| Mutation::Number { k, value }),
+        2 => (p, any::<u8>()).prop_map(|(pos, byte)| Mutation::Flip { pos, byte }),
+        1 => p.prop_map(|pos| Mutation::Truncate { pos }),
+        1 => (p, 1usize..64, p).prop_map(|(from, len, to)| Mutation::Splice { from, len, to }),
+        1 => (p, 1usize..32).prop_map(|(pos, len)| Mutation::Delete { pos, len }),
+        4 => (p, 0..EXTREME_NUMBERS.len()).prop_map(|(k, value)| Mutation::Number { k, value }),
         2 => (p, 0..EXTREME_WORDS.len()).prop_map(|(pos, value)| Mutation::Word { pos, value }),
     ]
 }

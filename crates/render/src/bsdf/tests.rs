@@ -203,37 +203,38 @@ fn chi2_half_vector_family(params: &Chi2Params, roughnesses: &[f32], seed: u64) 
     assert!(failures.is_empty(), "chi-square failures (half-vector space):\n{}", failures.join("\n"));
 }
 
-/// Known defect found by these tests: at low alpha, `sample` and `pdf` disagree. Measured
-/// (thorough grid, 2M samples): alpha 0.0064 at wo.z = 0.95 returns `None` for 61 samples
-/// where `pdf` integrates to 1.0002 (no sample may fail there: the lobe is 0.4 degrees wide,
-/// 18 degrees from the horizon), chi2 p ~ 1e-9 at alpha 0.01; at MIN_ALPHA (1e-3) the pdf
-/// integrates to 0.988 against a success rate of ~1. Likely f32 cancellation in GGX `D`
-/// (`(α² − 1) cos²θ + 1` with α² down to 1e-6). Until microfacet.rs is mended these run with
+/// Known defect found by these tests: at the smallest alpha (`MIN_ALPHA` = 1e-3, roughness
+/// 0) `sample` and `pdf` still disagree (chi2 p ~ 1e-73 on the standard grid, pdf integral
+/// 0.996). The f32 cancellation in GGX `D` and `Λ` that broke alpha 0.01 as well is mended
+/// (`1 − cos²θ` replaced by the x and y components); what is left is likely the precision
+/// of `sample_wm` at that scale. Until mended, roughness 0 runs with
 /// `FILTRACE_KNOWN_DEFECTS=1` (then remove this gate).
 fn known_defect_gate() -> bool {
     let on = std::env::var_os("FILTRACE_KNOWN_DEFECTS").is_some();
     if !on {
-        println!("SKIP: known defect (GGX sampling at low alpha); set FILTRACE_KNOWN_DEFECTS=1 to run");
+        println!("SKIP: known defect (GGX sampling at alpha 1e-3); set FILTRACE_KNOWN_DEFECTS=1 to run");
     }
     on
 }
 
-/// Roughness 0 (MIN_ALPHA = 1e-3) and 0.1 (alpha 0.01): lobes far narrower than a cell of the
-/// direction grid, tested in half-vector coordinates. (From alpha ~0.04 up the lobe's tail
-/// reaches half vectors near the horizon, cells too thin for the grid; the direction-grid
-/// tests above cover those roughnesses.)
+/// Roughness 0.1 (alpha 0.01), and 0 (MIN_ALPHA = 1e-3) behind the known-defect gate: lobes
+/// far narrower than a cell of the direction grid, tested in half-vector coordinates. (From
+/// alpha ~0.04 up the lobe's tail reaches half vectors near the horizon, cells too thin for
+/// the grid; the direction-grid tests above cover those roughnesses.)
 #[test]
 fn chi2_sample_matches_pdf_near_mirror() {
+    chi2_half_vector_family(&Chi2Params::standard(), &[0.1], 3);
     if known_defect_gate() {
-        chi2_half_vector_family(&Chi2Params::standard(), &[0.0, 0.1], 3);
+        chi2_half_vector_family(&Chi2Params::standard(), &[0.0], 3);
     }
 }
 
 #[test]
 #[ignore = "slow: half-vector chi-square at low roughnesses, 40 x 80 cells, 2M samples"]
 fn chi2_sample_matches_pdf_near_mirror_thorough() {
+    chi2_half_vector_family(&Chi2Params::thorough(), &[0.08, 0.1, 0.13], 4);
     if known_defect_gate() {
-        chi2_half_vector_family(&Chi2Params::thorough(), &[0.0, 0.08, 0.1, 0.13], 4);
+        chi2_half_vector_family(&Chi2Params::thorough(), &[0.0], 4);
     }
 }
 

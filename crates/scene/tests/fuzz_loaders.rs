@@ -6,8 +6,8 @@
 //!
 //! Fast tier: [`FAST_CASES`] per format. Slow tier (`--ignored`): [`SLOW_CASES`] per format.
 //!
-//! Generated glTF has no `children` (node hierarchies with cycles are a known defect fixed
-//! elsewhere); the slow glTF tiers wait for the accessor-range fix (`accessor_defect_fixed`).
+//! Generated glTF has no `children`; node cycles and shared children are tested one by one
+//! in `gltf_checks.rs`.
 
 mod fuzz_support;
 
@@ -328,18 +328,6 @@ fn fuzz_glb(cases: u32) {
     });
 }
 
-/// The slow glTF tiers find accessors whose offset/count overflow inside gltf 1.4's reader
-/// (`accessor/util.rs`: "attempt to multiply/subtract/add with overflow", a panic), the known
-/// defect of issue 17 item 6 (out-of-range accessors) fixed on another branch. Until that is
-/// merged they run only with `FILTRACE_FUZZ_GLTF_ACCESSORS=1`; then remove this gate.
-fn accessor_defect_fixed() -> bool {
-    let on = std::env::var_os("FILTRACE_FUZZ_GLTF_ACCESSORS").is_some();
-    if !on {
-        println!("SKIP: known defect (glTF accessor ranges); set FILTRACE_FUZZ_GLTF_ACCESSORS=1 to run");
-    }
-    on
-}
-
 #[test]
 fn gltf_fuzz() {
     if limited_child("gltf_fuzz", false) {
@@ -350,9 +338,6 @@ fn gltf_fuzz() {
 #[test]
 #[ignore = "slow: fuzz"]
 fn gltf_fuzz_slow() {
-    if !accessor_defect_fixed() {
-        return;
-    }
     if limited_child("gltf_fuzz_slow", true) {
         fuzz_gltf(SLOW_CASES);
     }
@@ -368,9 +353,6 @@ fn glb_fuzz() {
 #[test]
 #[ignore = "slow: fuzz"]
 fn glb_fuzz_slow() {
-    if !accessor_defect_fixed() {
-        return;
-    }
     if limited_child("glb_fuzz_slow", true) {
         fuzz_glb(SLOW_CASES);
     }

@@ -3,9 +3,9 @@
 
 use filtrace_accel::testmesh::{self, SplitMix64};
 use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd};
+use filtrace_core::shared_data::shared_path;
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
-use std::path::PathBuf;
 
 fn single(mesh: Mesh) -> Scene {
     let mut s = Scene::default();
@@ -147,12 +147,8 @@ fn instanced_scene_matches_brute_force_for_every_preset() {
 
 #[test]
 fn bunny_matches_brute_force() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/bunny/bunny_lowres.obj");
-    let Ok(mesh) = testmesh::read_obj(&path) else {
-        println!("SKIPPED: {} not found", path.display());
-        return;
-    };
+    let Some(path) = shared_path("scenes/bunny/bunny_lowres.obj") else { return };
+    let mesh = testmesh::read_obj(&path).unwrap_or_else(|e| panic!("{e}"));
     assert!(mesh.triangle_count() > 3000);
     check_scene(&single(mesh), 3000, 3);
 }
@@ -348,12 +344,7 @@ fn merged_identity_instances_match_brute_force_and_survive_moves() {
 #[test]
 #[ignore = "slow: brute force over 121k triangles"]
 fn gltf_engine_matches_brute_force() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/gltf/2CylinderEngine.glb");
-    if !path.exists() {
-        println!("SKIPPED: {} not found", path.display());
-        return;
-    }
+    let Some(path) = shared_path("scenes/gltf/2CylinderEngine.glb") else { return };
     let scene = filtrace_scene::load(&path).expect("engine loads");
     let accel = SceneAccel::build(&scene);
     let brute = BruteForce::build(&scene);

@@ -196,7 +196,7 @@ fn the_plain_render_estimate_matches_the_buffers_it_allocates() {
     let (w, h) = (320u32, 200u32);
     let dir = temp_dir("estimate");
     let exr_path = dir.join("e.exr");
-    // What `render` allocates per pixel, in its order: film, AOVs, EXR channels, PNG
+    // What `render` allocates per pixel, in its order: film, AOVs, sample counts, EXR, PNG
     // (`write_outputs`); the scene and the renderer are not part of the estimate.
     let peak = peak_during(|| {
         let film = filtrace_render::Film::try_new(w as usize, h as usize).unwrap();
@@ -225,6 +225,8 @@ fn the_plain_render_estimate_matches_the_buffers_it_allocates() {
             exr.insert(name, rgb, image).unwrap();
         }
         exr.insert("depth", &["Z"], &a.depth).unwrap();
+        let counts = film.sample_counts();
+        exr.insert("samples", &["Y"], &counts).unwrap();
         filtrace_io::write_exr(&exr_path, &exr).unwrap();
         let tonemap = filtrace_io::TonemapParams::srgb_clamp();
         filtrace_io::write_png(exr_path.with_extension("png"), &a.color, &tonemap).unwrap();

@@ -2,7 +2,8 @@
 //!
 //! The foundation every other filtrace crate stands on: math types (re-exported from
 //! `glam`), rays and bounding boxes, Monte Carlo sampling routines, the deterministic
-//! low-discrepancy sampler, and plain image buffers. No I/O lives here.
+//! low-discrepancy sampler, and plain image buffers. No I/O lives here, except
+//! [`shared_data`]: where every crate's tests find the data kept outside the repository.
 
 pub mod aabb;
 pub mod image;
@@ -10,6 +11,7 @@ pub mod ray;
 pub mod rng;
 pub mod sampler;
 pub mod sampling;
+pub mod shared_data;
 pub mod stats;
 
 pub use aabb::Aabb;

@@ -12,8 +12,9 @@ use std::sync::atomic::AtomicBool;
 use filtrace_core::Image;
 use filtrace_denoise::{AtrousParams, BilateralParams, Filter, GBuffer, GuidedParams, DEFAULT_ALBEDO_EPS};
 
-fn reference_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference/cornell_mitsuba_4096spp.exr")
+/// The reference, or `None` with a SKIP line when absent (a failure when `CI` is set).
+fn reference_path() -> Option<PathBuf> {
+    filtrace_core::shared_data::shared_path("reference/cornell_mitsuba_4096spp.exr")
 }
 
 fn rel_mse(x: &Image, r: &Image) -> f64 {
@@ -32,17 +33,7 @@ fn rel_mse(x: &Image, r: &Image) -> f64 {
 #[test]
 #[ignore = "slow: renders the Cornell box at 4 spp and runs every filter (~20 s)"]
 fn every_filter_lowers_rel_mse_10x_on_a_4spp_cornell_box() {
-    let path = reference_path();
-    if !path.exists() {
-        // In CI a missing reference is a failure, not a pass.
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set but the reference {} is missing",
-            path.display()
-        );
-        println!("SKIP: reference {} not found", path.display());
-        return;
-    }
+    let Some(path) = reference_path() else { return };
     let reference = filtrace_io::read_exr(&path).unwrap().require_layer(&["color"]).unwrap();
     let scene = filtrace_scene::load_scene("cornell").unwrap();
     let settings = filtrace_render::RenderSettings {

@@ -309,6 +309,34 @@ fn exr_error(path: &Path, e: exr::error::Error) -> IoError {
     }
 }
 
+/// Deflate, the strongest of the EXR compressions, packs at most ~1032 bytes into one.
+const MAX_COMPRESSION_RATIO: u64 = 2048;
+
+/// Refuses a file whose headers claim more decoded pixel data than its size could hold
+/// (ratio above [`MAX_COMPRESSION_RATIO`], plus 64 MiB): a corrupt size in a small file made
+/// the decoder allocate gigabytes (or abort on an allocation that cannot succeed).
+fn check_claimed_size(path: &Path) -> Result<(), IoError> {
+    let file_len =
+        std::fs::metadata(path).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?.len();
+    let meta = match std::panic::catch_unwind(|| exr::meta::MetaData::read_from_file(path, false)) {
+        Ok(Ok(m)) => m,
+        Ok(Err(e)) => return Err(exr_error(path, e)),
+        Err(_) => return Err(IoError::InvalidImage(format!("{}: corrupt EXR header", path.display()))),
+    };
+    let decoded: u64 = meta
+        .headers
+        .iter()
+        .map(|h| (h.layer_size.area() as u64).saturating_mul(h.channels.bytes_per_pixel as u64))
+        .fold(0, u64::saturating_add);
+    if decoded > file_len.saturating_mul(MAX_COMPRESSION_RATIO).saturating_add(64 << 20) {
+        return Err(IoError::InvalidImage(format!(
+            "{}: the header claims {decoded} bytes of pixels in a {file_len}-byte file (corrupt size)",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Reads every flat channel of every part (largest mip level) as f32. Parts of another
 /// size than the first are skipped with a note in [`ExrImage::warnings`]; part names
 /// become prefixes (`part.R`).
@@ -320,15 +348,29 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, IoError> {
             source: std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
         });
     }
+    check_claimed_size(path)?;
     use x::{ReadChannels, ReadLayers};
-    let file = x::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .all_layers()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| exr_error(path, e))?;
+    // Decompressed on this thread, so that a panic of the decoder on a corrupt file (exr 1.74's
+    // B44 decoder overflows on some) is caught here; on its worker threads it aborted.
+    let read = || {
+        x::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .non_parallel()
+            .from_file(path)
+    };
+    let file = match std::panic::catch_unwind(read) {
+        Ok(r) => r.map_err(|e| exr_error(path, e))?,
+        Err(_) => {
+            return Err(IoError::InvalidImage(format!(
+                "{}: corrupt EXR (the decoder failed on its data)",
+                path.display()
+            )))
+        }
+    };
     let Some(first) = file.layer_data.first() else {
         return Err(IoError::Empty { path: path.to_path_buf() });
     };

@@ -866,7 +866,7 @@ fn supersample<S: PathSource>(
     start_sums(buf, demod);
     let (mut samples_ms, mut lookup_ms) = (0.0, ms(t));
     let (mut failures, mut done) = (0, 0);
-    while done < extra && !cancel.load(Ordering::Relaxed) {
+    'passes: while done < extra && !cancel.load(Ordering::Relaxed) {
         let pass = SamplePass { first: done, count: done.clamp(1, SAMPLE_PASS_MAX).min(extra - done) };
         save_sums(buf);
         let total = pixels * pass.count;
@@ -878,7 +878,7 @@ fn supersample<S: PathSource>(
             samples_ms += ms(t);
             if !traced {
                 restore_sums(buf);
-                return Ok((samples_ms, lookup_ms, failures, done));
+                break 'passes;
             }
             let t = Instant::now();
             pass_failures += lookup_samples(buf, at..at + len, pass.count, demod);

@@ -108,20 +108,22 @@ pub const AOV_CHANNELS: u32 = 7 * 3 + 1;
 /// Bytes of writing `channels` f32 channels of `w x h` to an EXR with a PNG beside it: the
 /// layers are copied into the EXR's channel list, and writing it takes twice that again
 /// (`filtrace_io::write_exr` copies the channels, and the `exr` crate its blocks: measured,
-/// `crates/cli/tests/memory.rs`); the PNG's 8-bit buffer and its encoder's output are 3
-/// bytes per pixel each.
+/// `crates/cli/tests/memory.rs`), plus the encoded file, held whole until it is written
+/// atomically (at most the raw size: compression never grows it much); the PNG's 8-bit
+/// buffer and its encoder's output are 3 bytes per pixel each.
 pub fn output_bytes(w: u32, h: u32, channels: u32) -> u64 {
     let pixels = w as u64 * h as u64;
-    3 * image_bytes(w, h, channels) + 2 * 3 * pixels
+    4 * image_bytes(w, h, channels) + 2 * 3 * pixels
 }
 
-/// A plain `render` of `w x h`: the film, its AOV images, and the EXR + PNG output, all
-/// alive while the EXR is written. Independent of the sample count (the film keeps sums).
+/// A plain `render` of `w x h`: the film, its AOV images and per-pixel sample counts, and
+/// the EXR + PNG output, all alive while the EXR is written. Independent of the sample
+/// count (the film keeps sums).
 pub fn plain_render(w: u32, h: u32) -> MemoryEstimate {
     MemoryEstimate::new(format!("a {w}x{h} render"))
         .with("film", film_bytes(w, h))
-        .with("AOV images", image_bytes(w, h, AOV_CHANNELS))
-        .with("EXR and PNG output", output_bytes(w, h, AOV_CHANNELS))
+        .with("AOV images", image_bytes(w, h, AOV_CHANNELS + 1))
+        .with("EXR and PNG output", output_bytes(w, h, AOV_CHANNELS + 1))
 }
 
 /// Memory the machine has for this process, and where the number comes from.

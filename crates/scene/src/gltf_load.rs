@@ -56,7 +56,7 @@ pub const GLTF_EXTENSIONS_READ: &[&str] = &["KHR_lights_punctual", "KHR_material
 
 /// Loads a `.gltf` or `.glb` file.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
-    let (doc, buffers, images) = gltf::import(path).map_err(|e| gltf_error(path, e))?;
+    let (doc, buffers, images) = import(path)?;
     let mut scene = Scene {
         name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
         ..Scene::default()
@@ -276,6 +276,41 @@ fn convert_camera(cam: &gltf::Camera, affine: &Affine3A) -> Result<Option<Camera
         return Ok(None);
     }
     Ok(Some(Camera { eye, target: eye + fwd, up, vfov_deg: yfov.to_degrees() }))
+}
+
+/// `gltf::import`, with a panic inside it turned into an error: gltf-json 1.4's validation
+/// indexes `accessors` with the POSITION attribute's index before checking it is in range.
+fn import(
+    path: &Path,
+) -> Result<(gltf::Document, Vec<gltf::buffer::Data>, Vec<gltf::image::Data>), SceneError> {
+    check_glb_length(path)?;
+    match std::panic::catch_unwind(|| gltf::import(path)) {
+        Ok(r) => r.map_err(|e| gltf_error(path, e)),
+        Err(_) => Err(SceneError::parse(
+            path,
+            None,
+            "malformed glTF (the validator failed on it; is an accessor index out of range?)",
+        )),
+    }
+}
+
+/// A binary glTF whose header claims more bytes than the file holds is an error: gltf 1.4
+/// allocates the claimed length (up to 4 GiB) before reading.
+fn check_glb_length(path: &Path) -> Result<(), SceneError> {
+    use std::io::Read;
+    let io = |source| SceneError::Io { path: path.to_path_buf(), source };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut header = [0u8; 12];
+    if file.read_exact(&mut header).is_err() || &header[..4] != b"glTF" {
+        return Ok(()); // Not binary glTF, or too short: gltf reports it.
+    }
+    let claimed = u32::from_le_bytes([header[8], header[9], header[10], header[11]]) as u64;
+    let actual = file.metadata().map_err(io)?.len();
+    if claimed > actual {
+        let msg = format!("GLB header claims {claimed} bytes, the file has {actual} (truncated or corrupt)");
+        return Err(SceneError::parse(path, None, msg));
+    }
+    Ok(())
 }
 
 fn gltf_error(path: &Path, e: gltf::Error) -> SceneError {

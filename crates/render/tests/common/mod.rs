@@ -2,21 +2,13 @@
 #![allow(dead_code)]
 
 use filtrace_core::{Image, Rgb, Vec3};
-use filtrace_render::{Film, RenderSettings, Renderer};
+use filtrace_render::{Film, IntegratorKind, RenderSettings, Renderer};
 use filtrace_scene::{Camera, Material, MaterialId, Mesh, Scene};
-use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-/// `../shared` seen from the workspace root, or `None` (with a message) when absent.
-pub fn shared_dir() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("SKIPPED: {} is absent", p.display());
-        None
-    }
-}
+/// `../shared/<rel>`, or `None` with a SKIP line when absent (a failure when `CI` is set).
+#[allow(unused_imports)]
+pub use filtrace_core::shared_data::shared_path as shared;
 
 /// Appends a quad (p0, p1, p2, p3), counter-clockwise seen from its front, as two triangles.
 pub fn push_quad(mesh: &mut Mesh, q: [Vec3; 4], material: MaterialId) {
@@ -101,4 +93,47 @@ pub fn interior_pixels(w: usize, h: usize, inside: impl Fn(usize, usize) -> bool
         }
     }
     v
+}
+
+/// z-scores of the difference of two films: over the whole image and over blocks of
+/// `block x block` pixels, per channel. Returns the largest |z|.
+pub fn max_block_z(a: &Film, b: &Film, block: usize) -> (f64, f64) {
+    let (fa, fb) = (a.aovs(), b.aovs());
+    let (w, h) = (fa.width, fa.height);
+    let z_of = |pixels: &[(usize, usize)], c: usize| {
+        let (ma, va) = mean_and_var(&fa.color, &fa.variance, pixels, c);
+        let (mb, vb) = mean_and_var(&fb.color, &fb.variance, pixels, c);
+        (ma - mb) / (va + vb + 1e-12).sqrt()
+    };
+    let all = all_pixels(w, h);
+    let image_z = (0..3).map(|c| z_of(&all, c).abs()).fold(0.0, f64::max);
+    let mut block_z = 0.0f64;
+    for by in (0..h).step_by(block) {
+        for bx in (0..w).step_by(block) {
+            let px: Vec<_> = (by..(by + block).min(h))
+                .flat_map(|y| (bx..(bx + block).min(w)).map(move |x| (x, y)))
+                .collect();
+            for c in 0..3 {
+                block_z = block_z.max(z_of(&px, c).abs());
+            }
+        }
+    }
+    (image_z, block_z)
+}
+
+/// NEE + MIS (default integrator) against BSDF sampling only (another seed): the image
+/// means and every 8 x 8 block mean must agree within the z-bounds below, from the films'
+/// own variances.
+pub fn nee_vs_bsdf_only(label: &str, scene: Scene, size: u32, spp_nee: u32, spp_bsdf: u32, max_depth: i32) {
+    let nee = Renderer::new(scene.clone(), settings(size, size, spp_nee, max_depth)).unwrap();
+    let mut s = settings(size, size, spp_bsdf, max_depth);
+    s.seed = 12345;
+    let naive = Renderer::new(scene, s).unwrap().with_integrator(IntegratorKind::BsdfOnly);
+    let (fa, fb) = (render(&nee), render(&naive));
+    assert_eq!(fa.dropped_samples() + fb.dropped_samples(), 0);
+    let (image_z, block_z) = max_block_z(&fa, &fb, 8);
+    println!("{label}: image |z| {image_z:.2}, worst block |z| {block_z:.2}");
+    // Image mean: |z| < 4.5. Blocks: 3 * (size/8)^2 tests, Sidak-corrected to ~5.
+    assert!(image_z < 4.5, "{label}: image means differ: z = {image_z:.2}");
+    assert!(block_z < 5.0, "{label}: a block mean differs: z = {block_z:.2}");
 }

@@ -1,23 +1,10 @@
 //! Helpers shared by the loader tests.
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
 use std::path::PathBuf;
 
-/// `../shared` from the project root, or `None` (with a printed message) when absent;
-/// under CI (the `CI` variable set) a missing file fails the test instead of skipping it.
-pub fn shared(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(rel);
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} not found (../shared is required when CI is set)",
-        p.display()
-    );
-    println!("SKIPPED: {} not found (../shared is absent)", p.display());
-    None
-}
+/// `../shared/<rel>`, or `None` with a SKIP line when absent (a failure when `CI` is set).
+pub use filtrace_core::shared_data::shared_path as shared;
 
 /// Writes `files` (name, content) into a fresh folder under the system temp dir.
 pub fn temp_files(tag: &str, files: &[(&str, &[u8])]) -> PathBuf {

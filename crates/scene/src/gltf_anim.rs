@@ -22,6 +22,7 @@ use crate::types::{Camera, Light};
 pub const GLTF_FPS: f32 = 24.0;
 
 /// A node placed by the loader's walk, in walk order (parents before children).
+#[derive(Debug)]
 pub(crate) struct VisitedNode {
     pub gltf_index: usize,
     /// Walk-order index of the parent.
@@ -68,9 +69,7 @@ pub(crate) fn read_animation(
             let keyed = read_channel(&channel, buffers, track).map_err(|m| format!("{at}: {m}"))?;
             match keyed {
                 Keyed::Set(end) => last_key = last_key.max(end),
-                Keyed::AlreadyKeyed => {
-                    warnings.push(format!("{at}: property keyed twice, later one ignored"))
-                }
+                Keyed::Twice => warnings.push(format!("{at}: property keyed twice, later one ignored")),
                 Keyed::MorphWeights => {
                     warnings.push(format!("{at}: morph-target weights are not supported, ignored"))
                 }
@@ -103,7 +102,7 @@ fn place_on_nodes(mut anim: SceneAnimation, nodes: Vec<AnimNode>, visited: &[Vis
 enum Keyed {
     /// Keyed, with the last key's time.
     Set(f32),
-    AlreadyKeyed,
+    Twice,
     MorphWeights,
 }
 
@@ -120,7 +119,7 @@ fn read_channel(
         Property::MorphTargetWeights => return Ok(Keyed::MorphWeights),
     };
     if already {
-        return Ok(Keyed::AlreadyKeyed);
+        return Ok(Keyed::Twice);
     }
     let sampler = channel.sampler();
     check_accessor(&sampler.input(), buffers, "sampler input", Kind::ScalarF32)?;

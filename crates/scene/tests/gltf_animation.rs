@@ -188,7 +188,9 @@ fn malformed_animations_are_errors_naming_the_channel() {
         )
     };
     let plain = r#"{"mesh": 0}"#;
-    let cases: [(&str, &[f32], &[f32], &str, &str, &str); 4] = [
+    /// (tag, key times, values, interpolation, node JSON, expected message part)
+    type Case<'a> = (&'a str, &'a [f32], &'a [f32], &'a str, &'a str, &'a str);
+    let cases: [Case; 4] = [
         ("order", &[1.0, 0.5], &[0.0; 6], "LINEAR", plain, "not after"),
         ("nan", &[0.0, f32::NAN], &[0.0; 6], "LINEAR", plain, "non-finite time"),
         ("cubic-count", &[0.0, 1.0], &[0.0; 6], "CUBICSPLINE", plain, "3 outputs per key"),

@@ -46,41 +46,30 @@ pub trait Keyable: Copy + fmt::Debug {
     }
 }
 
-impl Keyable for f32 {
-    fn is_finite_value(&self) -> bool {
-        self.is_finite()
-    }
-    fn lerp_to(self, other: Self, t: f32) -> Self {
-        self + (other - self) * t
-    }
-    fn sub(self, other: Self) -> Self {
-        self - other
-    }
-    fn scaled(self, s: f32) -> Self {
-        self * s
-    }
-    fn add(self, other: Self) -> Self {
-        self + other
-    }
+/// Scalars and vectors key by plain arithmetic.
+macro_rules! keyable_by_arithmetic {
+    ($($t:ty),*) => {$(
+        impl Keyable for $t {
+            fn is_finite_value(&self) -> bool {
+                self.is_finite()
+            }
+            fn lerp_to(self, other: Self, t: f32) -> Self {
+                self + (other - self) * t
+            }
+            fn sub(self, other: Self) -> Self {
+                self - other
+            }
+            fn scaled(self, s: f32) -> Self {
+                self * s
+            }
+            fn add(self, other: Self) -> Self {
+                self + other
+            }
+        }
+    )*};
 }
 
-impl Keyable for Vec3 {
-    fn is_finite_value(&self) -> bool {
-        self.is_finite()
-    }
-    fn lerp_to(self, other: Self, t: f32) -> Self {
-        self.lerp(other, t)
-    }
-    fn sub(self, other: Self) -> Self {
-        self - other
-    }
-    fn scaled(self, s: f32) -> Self {
-        self * s
-    }
-    fn add(self, other: Self) -> Self {
-        self + other
-    }
-}
+keyable_by_arithmetic!(f32, Vec3);
 
 impl Keyable for Quat {
     fn is_finite_value(&self) -> bool {

@@ -9,8 +9,10 @@
 //! Generated glTF has no `children`; node cycles and shared children are tested one by one
 //! in `gltf_checks.rs`.
 
+mod common;
 mod fuzz_support;
 
+use common::base64;
 use std::path::{Path, PathBuf};
 
 use filtrace_scene::toml_scene::parse_toml;
@@ -240,23 +242,6 @@ fn gltf_json(buffer_uri: Option<&str>, image_uri: &str) -> String {
   "buffers": [{{{uri}"byteLength": 140}}]
 }}"#
     )
-}
-
-/// Standard base64 (RFC 4648, with padding), for data URIs.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
-        for k in 0..4 {
-            if k <= c.len() {
-                s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
 }
 
 /// A `.glb`: 12-byte header, JSON chunk (space padded), BIN chunk (zero padded).

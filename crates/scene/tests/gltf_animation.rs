@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::temp_files;
+use common::{base64, temp_files};
 use filtrace_core::Vec3;
 use filtrace_scene::{load, Scene, SceneError};
 
@@ -67,18 +67,6 @@ impl Buf {
             self.accessors.join(", ")
         )
     }
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let n = chunk.iter().enumerate().fold(0u32, |n, (i, &b)| n | (b as u32) << (16 - 8 * i));
-        for i in 0..4 {
-            out.push(if i <= chunk.len() { A[(n >> (18 - 6 * i) & 63) as usize] as char } else { '=' });
-        }
-    }
-    out
 }
 
 fn load_json(tag: &str, json: &str) -> Result<Scene, SceneError> {

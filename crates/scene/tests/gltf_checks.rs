@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::temp_files;
+use common::{base64, temp_files};
 use filtrace_core::Vec3;
 use filtrace_scene::{load, Light, Scene, SceneError};
 
@@ -270,20 +270,4 @@ fn camera_fov_and_base_colour_out_of_range_are_errors() {
   "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "material": 0}}]}}], "nodes": [{{"mesh": 0}}, {{}}]"#
     ));
     expect_error("albedo", &json, &["material 0 ('hot')", "baseColorFactor"]);
-}
-
-fn base64(data: &[u8]) -> String {
-    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in data.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
-        for i in 0..4 {
-            if i <= c.len() {
-                out.push(A[(n >> (18 - 6 * i)) as usize & 63] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }

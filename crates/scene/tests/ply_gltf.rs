@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{shared, temp_files};
+use common::{base64, shared, temp_files};
 use filtrace_core::{Vec2, Vec3};
 use filtrace_scene::{load, Bsdf, SceneError};
 
@@ -307,22 +307,6 @@ fn malformed_gltf_json_names_the_line() {
         }
         other => panic!("{other:?}"),
     }
-}
-
-fn base64(data: &[u8]) -> String {
-    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in data.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
-        for i in 0..4 {
-            if i <= c.len() {
-                out.push(A[(n >> (18 - 6 * i)) as usize & 63] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 #[test]

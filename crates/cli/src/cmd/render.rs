@@ -20,7 +20,7 @@ use filtrace_render::film::Aovs;
 use filtrace_render::renderer::progressive_passes;
 use filtrace_render::{Film, RenderSettings, Renderer};
 use serde::Serialize;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -489,10 +489,11 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
         degenerate_triangles_skipped: degenerate,
         nonfinite_samples: film.dropped_samples(),
     };
+    let mut out = super::output::stdout();
     if c.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        writeln!(out, "{}", serde_json::to_string(&summary)?)?;
     } else {
-        print_summary(&summary, written.png_nonfinite);
+        print_summary(&mut out, &summary, written.png_nonfinite)?;
     }
     if cancelled {
         eprintln!(
@@ -534,12 +535,14 @@ fn render_passes(
     (film, start.elapsed().as_secs_f64())
 }
 
-fn print_summary(s: &Summary, png_nonfinite: usize) {
-    println!(
+fn print_summary(out: &mut impl Write, s: &Summary, png_nonfinite: usize) -> std::io::Result<()> {
+    writeln!(
+        out,
         "{}: {} at {} spp, max depth {}, seed {}, {} threads",
         s.scene, s.res, s.spp_done, s.max_depth, s.seed, s.threads
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "  {} triangles ({} degenerate skipped); load {:.3} s, build {:.3} s, render {:.3} s ({:.2} M samples/s)",
         s.triangles,
         s.degenerate_triangles_skipped,
@@ -547,15 +550,16 @@ fn print_summary(s: &Summary, png_nonfinite: usize) {
         s.build_s,
         s.render_s,
         s.samples_per_s / 1e6
-    );
-    println!("  mean linear RGB {:.6} {:.6} {:.6}", s.mean_rgb[0], s.mean_rgb[1], s.mean_rgb[2]);
+    )?;
+    writeln!(out, "  mean linear RGB {:.6} {:.6} {:.6}", s.mean_rgb[0], s.mean_rgb[1], s.mean_rgb[2])?;
     if s.nonfinite_samples > 0 {
-        println!("  warning: {} non-finite samples were dropped", s.nonfinite_samples);
+        writeln!(out, "  warning: {} non-finite samples were dropped", s.nonfinite_samples)?;
     }
     if png_nonfinite > 0 {
-        println!("  warning: {png_nonfinite} non-finite values written as 0 in the PNG");
+        writeln!(out, "  warning: {png_nonfinite} non-finite values written as 0 in the PNG")?;
     }
-    println!("  wrote {} and {}", s.output.display(), s.png.display());
+    writeln!(out, "  wrote {} and {}", s.output.display(), s.png.display())?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -23,6 +23,7 @@ use filtrace_pipeline::{
 };
 use filtrace_render::Renderer;
 use serde::Serialize;
+use std::io::Write;
 
 use super::render::{render_attributes, test_hook, CommonArgs, CtrlC, Interrupted, DEFAULT_SPP};
 
@@ -217,8 +218,9 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
         output: &out,
         cancelled,
     };
+    let mut stdout = super::output::stdout();
     if common.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        writeln!(stdout, "{}", serde_json::to_string(&summary)?)?;
     } else {
         let t = &frame.timings;
         let paths = match adaptive.params() {
@@ -228,7 +230,8 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
             ),
             None => format!("{} indirect path(s) per guide ray", summary.indirect_paths),
         };
-        println!(
+        writeln!(
+            stdout,
             "{}: {}x{} at {} spp ({paths}), max depth {}, filter {}, {} threads",
             summary.scene,
             summary.width,
@@ -237,8 +240,8 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
             summary.max_depth,
             summary.filter,
             threads
-        );
-        println!(
+        )?;
+        writeln!(stdout,
             "  frame {:.1} ms: guide rays {:.1}, filter {:.1}, further samples {:.1}, lookup {:.1} (trace {:.1})",
             t.total_ms,
             t.guide_ms,
@@ -246,21 +249,26 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
             t.samples_ms,
             t.lookup_ms,
             t.trace_ms()
-        );
-        println!(
+        )?;
+        writeln!(
+            stdout,
             "  load {load_s:.3} s, build {build_s:.3} s; mean linear RGB {:.6} {:.6} {:.6}",
             m[0], m[1], m[2]
-        );
+        )?;
         if let Some(p) = plan_ms {
-            println!("  adaptive sampling: plan (G-buffer pass, importance, apportionment) {p:.1} ms");
+            writeln!(
+                stdout,
+                "  adaptive sampling: plan (G-buffer pass, importance, apportionment) {p:.1} ms"
+            )?;
         }
         if frame.lookup_failures > 0 {
-            println!(
+            writeln!(
+                stdout,
                 "  {} further samples found no guide ray that hit (no indirect light)",
                 frame.lookup_failures
-            );
+            )?;
         }
-        println!("  wrote {} and {}", out.display(), out.with_extension("png").display());
+        writeln!(stdout, "  wrote {} and {}", out.display(), out.with_extension("png").display())?;
     }
     if cancelled {
         eprintln!(

@@ -2,8 +2,10 @@
 """Embree 4 (through embreex) on the ray sets of `filtrace_accel::bench::ray_bench`.
 
 Same mesh (an OBJ: the file itself, or one written by
-`cargo run --release -p filtrace-accel --example raybench -- SCENE --write-obj OUT.obj`),
-same ray distributions and counts:
+`cargo run --release -p filtrace-accel --example raybench -- SCENE --write-obj OUT.obj`; or
+with --scene-dir DIR a scene of `filtrace bench suite` dumped by
+`filtrace bench suite --scenes NAME --dump-scene-json OUT`, DIR = OUT/NAME: every instance's
+world-space triangles in one Embree mesh), same ray distributions and counts:
   - primary: W x H pinhole camera, 45 degree vertical fov, eye at
     centre + normalize(0.5, 0.4, 1.0) * 2.4 * bounding radius, one ray per pixel;
   - incoherent: N rays, origins uniform in the bounding box, directions uniform on the
@@ -17,17 +19,56 @@ rtcIntersect1 in a loop on that thread; the BVH build happens before timing). Wi
 releases the GIL, which the script reports rather than assumes.
 
     pip install embreex trimesh
-    python3 scripts/embree_bench.py MESH.obj [--rays N] [--res WxH] [--threads T] [--repeats K] [--json]
+    python3 scripts/embree_bench.py {MESH.obj | --scene-dir DIR} [--rays N] [--res WxH] [--threads T] [--repeats K] [--json]
 """
 import argparse
 import json
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
+
+
+def read_ply(path):
+    """Positions and triangles of a binary little-endian PLY as the suite dump writes it
+    (float x y z [nx ny nz] [u v], faces as uchar 3 + int32 x 3)."""
+    with open(path, "rb") as f:
+        props, counts, element = [], {}, None
+        while True:
+            line = f.readline().decode("ascii").strip()
+            if line == "end_header":
+                break
+            parts = line.split()
+            if parts[0] == "element":
+                element, counts[parts[1]] = parts[1], int(parts[2])
+            elif parts[0] == "property" and element == "vertex":
+                props.append(parts[-1])
+        data = f.read()
+    vertex = np.dtype([(p, "<f4") for p in props])
+    nv, nf = counts["vertex"], counts["face"]
+    verts = np.frombuffer(data, dtype=vertex, count=nv)
+    faces = np.frombuffer(data, dtype=np.dtype([("n", "u1"), ("i", "<i4", 3)]), count=nf, offset=nv * vertex.itemsize)
+    if nf and not (faces["n"] == 3).all():
+        raise SystemExit(f"{path}: only triangles are expected")
+    pos = np.stack([verts["x"], verts["y"], verts["z"]], axis=1).astype(np.float64)
+    return pos, faces["i"]
+
+
+def scene_triangles(scene_dir):
+    """World-space triangles (n, 3, 3) of every instance of every shape of a suite dump."""
+    with open(os.path.join(scene_dir, "scene.json")) as f:
+        doc = json.load(f)
+    parts = []
+    for s in doc["shapes"]:
+        pos, idx = read_ply(os.path.join(scene_dir, s["file"]))
+        for m in s["instances"]:
+            m = np.asarray(m, dtype=np.float64).reshape(4, 4)
+            world = pos @ m[:3, :3].T + m[:3, 3]
+            parts.append(world[idx])
+    return np.concatenate(parts).astype(np.float32), doc["name"]
 
 
 def primary_rays(lo, hi, w, h):
@@ -86,7 +127,8 @@ def measure(scene, o, d, query, threads, repeats):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("mesh")
+    ap.add_argument("mesh", nargs="?", help="an OBJ file (or use --scene-dir)")
+    ap.add_argument("--scene-dir", help="a scene dumped by `filtrace bench suite --dump-scene-json`")
     ap.add_argument("--rays", type=int, default=1 << 20)
     ap.add_argument("--res", default="1024x1024")
     ap.add_argument("--threads", type=int, default=1)
@@ -96,8 +138,15 @@ def main():
     a = ap.parse_args()
     w, h = (int(x) for x in a.res.split("x"))
 
-    mesh = trimesh.load(a.mesh, process=False, force="mesh")
-    tris = mesh.vertices[mesh.faces].astype(np.float32)
+    if (a.mesh is None) == (a.scene_dir is None):
+        ap.error("give either MESH or --scene-dir")
+    if a.scene_dir:
+        tris, name = scene_triangles(a.scene_dir)
+    else:
+        import trimesh
+
+        mesh = trimesh.load(a.mesh, process=False, force="mesh")
+        tris, name = mesh.vertices[mesh.faces].astype(np.float32), a.mesh
     t0 = time.perf_counter()
     scene = rtcore_scene.EmbreeScene()
     TriangleMesh(scene, tris)
@@ -107,7 +156,7 @@ def main():
     scene.run(io[:1024], idr[:1024])  # commits the scene: the BVH build
     build_s = time.perf_counter() - t0
     rep = {
-        "mesh": a.mesh,
+        "mesh": name,
         "triangles": len(tris),
         "threads": a.threads,
         "build_s_incl_ray_generation": build_s,
@@ -118,7 +167,7 @@ def main():
     if a.json:
         print(json.dumps(rep, indent=2))
         return
-    print(f"embree (embreex) `{a.mesh}`: {len(tris)} triangles, {a.threads} thread(s)")
+    print(f"embree (embreex) `{name}`: {len(tris)} triangles, {a.threads} thread(s)")
     print("| query | Mrays/s | Mrays per CPU-s | hit fraction |\n|---|---:|---:|---:|")
     for k in ("primary_closest", "incoherent_closest", "incoherent_any"):
         m = rep[k]

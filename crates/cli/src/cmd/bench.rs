@@ -15,6 +15,8 @@ pub enum Which {
     Pipeline(super::bench_pipeline::Args),
     /// Adaptive sampling overheads (importance map, apportionment, batches).
     Adaptive(super::bench_adaptive::Args),
+    /// The scene suite of issue 13: samples/s and ray throughput per scene.
+    Suite(super::bench_suite::Args),
 }
 
 pub fn run(which: Which) -> anyhow::Result<()> {
@@ -24,5 +26,6 @@ pub fn run(which: Which) -> anyhow::Result<()> {
         Which::Render(a) => super::bench_render::run(a),
         Which::Pipeline(a) => super::bench_pipeline::run(a),
         Which::Adaptive(a) => super::bench_adaptive::run(a),
+        Which::Suite(a) => super::bench_suite::run(a),
     }
 }

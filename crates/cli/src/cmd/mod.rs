@@ -7,6 +7,7 @@ pub mod bench_filters;
 pub mod bench_pipeline;
 pub mod bench_rays;
 pub mod bench_render;
+pub mod bench_suite;
 pub mod compare;
 pub mod denoise;
 pub mod experiment;

@@ -7,7 +7,7 @@
 #   scripts/bench_suite.sh [--filtrace PATH] [--scenes a,b,...] [--spp N] [--res N]
 #       [--max-depth N] [--threads T] [--rays N] [--repeats K] [--rounds R]
 #       [--scaling "1 2 4 ..."] [--scaling-scenes a,b] [--filter-res WxH] [--frames N]
-#       [--skip-peers] [--skip-rays] [--skip-scaling] [--out DIR]
+#       [--skip-peers] [--skip-rays] [--skip-scaling] [--out DIR] [--report-only]
 #
 # Part 1, per scene and round (A B A B ...): filtrace path tracing, Mitsuba 3 on the same
 # scene (dumped by `filtrace bench suite --dump-scene-json`), filtrace rays on 1 thread,
@@ -16,14 +16,15 @@
 # guided filter at --filter-res (`RAYON_NUM_THREADS=T bench filters`) and the filtered
 # pipeline (`bench pipeline --threads T`).
 # Writes OUT/commands.log (every command, exactly as run), OUT/raw/*.json, OUT/suite.md and
-# OUT/scaling.md; prints both tables at the end.
+# OUT/scaling.md; prints both tables at the end. --report-only --out DIR rebuilds the tables
+# from DIR/raw (after an interrupted run, say) without measuring anything.
 set -euo pipefail
 
 FILTRACE=target/release/filtrace
 SCENES=cornell,bunny-room,grass,grass-1m,engine,bunny,teapot
 SPP=64 RES=512 MAX_DEPTH=8 THREADS=$(nproc) RAYS=1048576 REPEATS=3 ROUNDS=2
 SCALING="" SCALING_SCENES=cornell,bunny-room FILTER_RES=1920x1080 FRAMES=20
-PEERS=1 RAYS_ON=1 SCALING_ON=1 OUT=""
+PEERS=1 RAYS_ON=1 SCALING_ON=1 OUT="" REPORT_ONLY=0
 while [ $# -gt 0 ]; do
     case "$1" in
         --filtrace) FILTRACE=$2 ;;
@@ -43,13 +44,23 @@ while [ $# -gt 0 ]; do
         --skip-peers) PEERS=0; shift; continue ;;
         --skip-rays) RAYS_ON=0; shift; continue ;;
         --skip-scaling) SCALING_ON=0; shift; continue ;;
-        -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
+        --report-only) REPORT_ONLY=1; shift; continue ;;
+        -h|--help) sed -n '2,23p' "$0"; exit 0 ;;
         *) echo "bench_suite.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     [ $# -ge 2 ] || { echo "bench_suite.sh: $1 needs a value" >&2; exit 2; }
     shift 2
 done
-[ -x "$FILTRACE" ] || { echo "bench_suite.sh: no filtrace binary at $FILTRACE (cargo build --release -p filtrace, or --filtrace PATH)" >&2; exit 2; }
+if [ "$REPORT_ONLY" = 1 ]; then
+    [ -n "$OUT" ] && [ -d "$OUT/raw" ] || { echo "bench_suite.sh: --report-only needs --out DIR with DIR/raw" >&2; exit 2; }
+    PEERS=0 RAYS_ON=0 SCALING_ON=0 ROUNDS=0
+else
+    [ -x "$FILTRACE" ] || { echo "bench_suite.sh: no filtrace binary at $FILTRACE (cargo build --release -p filtrace, or --filtrace PATH)" >&2; exit 2; }
+fi
+if [ "$PEERS" = 1 ] && ! python3 -c "import mitsuba, drjit, embreex, numpy" 2>/dev/null; then
+    echo "bench_suite.sh: the peers need: pip install mitsuba embreex trimesh; apt-get install -y libllvm19 (or --skip-peers)" >&2
+    exit 2
+fi
 if [ -z "$SCALING" ]; then
     t=1; SCALING=""
     while [ "$t" -lt "$(nproc)" ]; do SCALING="$SCALING $t"; t=$((t * 2)); done
@@ -59,7 +70,7 @@ OUT=${OUT:-bench-suite-$(date -u +%Y%m%dT%H%M%SZ)}
 HERE=$(cd "$(dirname "$0")" && pwd)
 mkdir -p "$OUT/raw" "$OUT/scenes"
 LOG="$OUT/commands.log"
-: > "$LOG"
+[ "$REPORT_ONLY" = 1 ] || : > "$LOG"
 echo "# $(date -u +%FT%TZ) $(uname -n), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), filtrace $(git -C "$HERE/.." rev-parse --short HEAD 2>/dev/null || echo '?')" >> "$LOG"
 
 # run OUTFILE CMD...: logs the command, runs it with stdout to OUTFILE (stderr to the terminal).
@@ -110,11 +121,14 @@ fi
 SCALING_END=$(date +%s)
 echo "# suite $((SUITE_END - SUITE_START)) s, scaling $((SCALING_END - SUITE_END)) s" >> "$LOG"
 
-python3 - "$OUT" "$SCENES" "$SCALING" "$FILTER_RES" <<'PY'
-import glob, json, os, statistics, sys
+python3 - "$OUT" "$SCENES" <<'PY'
+import glob, json, os, re, statistics, sys
 
-out, scenes, scaling, filter_res = sys.argv[1], sys.argv[2].split(","), sys.argv[3].split(), sys.argv[4]
+# The thread counts are those of the scaling files present (so --report-only needs no list).
+out, scenes = sys.argv[1], sys.argv[2].split(",")
 raw = os.path.join(out, "raw")
+scaling = sorted({int(m.group(1)) for p in glob.glob(os.path.join(raw, "scaling_*_*.json"))
+                  if (m := re.search(r"_(\d+)\.json$", p))})
 
 
 def load(pattern):
@@ -158,7 +172,9 @@ lines = ["| scene | triangles | filtrace M samples/s | Mitsuba M samples/s | rat
          "| closest: filtrace / Embree Mrays per CPU-s | ratio (rounds) | any: filtrace / Embree | ratio (rounds) |",
          "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
 for scene in scenes:
-    d = "".join(c if c.isalnum() or c in "._-" else "_" for c in scene)
+    d = "".join(c if (c.isascii() and c.isalnum()) or c in "._-" else "_" for c in scene)
+    if not glob.glob(os.path.join(raw, f"*_{d}_*.json")):
+        continue
     fr = [doc["scenes"][0] for doc in load(f"filtrace_render_{d}_*.json")]
     mi = load(f"mitsuba_{d}_*.json")
     frays = [doc["scenes"][0]["rays"] for doc in load(f"filtrace_rays_{d}_*.json")]
@@ -192,16 +208,17 @@ for t in scaling:
     pl = load(f"scaling_pipeline_{t}.json")
     if not (pt or at or gu or pl):
         continue
-    w, h = (int(x) for x in filter_res.split("x"))
     cols = {}
     for s in (pt[0]["scenes"] if pt else []):
         cols[f"path tracer {s['scene']}, M samples/s"] = (s["render"][0]["samples_per_s_best"] / 1e6, True)
     for r in (at[0]["dammertz2010_table2"] if at else []):
-        if (r["width"], r["height"], r["iterations"], r["weights"]) == (w, h, 5, 3):
-            cols[f"À-Trous {filter_res} 5 it, ms"] = (r["ms"], False)
-    for r in (gu[0]["bauszat2011_table2"]["rows"] if gu else []):
-        if r["setting"] == "4 dimension, radius 32":
-            cols[f"guided {filter_res} 4 ch r 32, ms"] = (r["ms"], False)
+        if (r["iterations"], r["weights"]) == (5, 3):
+            cols[f"À-Trous {r['width']}x{r['height']} 5 it, ms"] = (r["ms"], False)
+    if gu:
+        size = f"{gu[0]['bauszat2011_table2']['width']}x{gu[0]['bauszat2011_table2']['height']}"
+        for r in gu[0]["bauszat2011_table2"]["rows"]:
+            if r["setting"] == "4 dimension, radius 32":
+                cols[f"guided {size} 4 ch r 32, ms"] = (r["ms"], False)
     for r in (pl[0]["rows"] if pl else []):
         cols[f"pipeline {r['filter']}, fps"] = (r["fps_median"], True)
     names = names or list(cols)
@@ -211,7 +228,7 @@ for t in scaling:
         if v is not None and n not in base:
             base[n] = v
         speed = None if v is None else (v / base[n] if higher_better else base[n] / v)
-        eff = None if speed is None else speed * int(scaling[0]) / int(t)
+        eff = None if speed is None else speed * scaling[0] / t
         cells.append("-" if v is None else f"{v:.2f} ({speed:.2f}x, {eff:.0%})")
     rows.append(f"| {t} | " + " | ".join(cells) + " |")
 if rows:

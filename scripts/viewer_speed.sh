@@ -14,16 +14,17 @@ scene=${2:-cornell}
 res=${3:-512x512}
 fps=${4:-1}
 seconds=${5:-10}
-display=":$((300 + RANDOM % 300))"
+num=$((300 + RANDOM % 300))
+display=":$num"
 Xvfb "$display" -screen 0 1280x1024x24 -nolisten tcp >/dev/null 2>&1 &
 xvfb=$!
 trap 'kill $xvfb 2>/dev/null || true' EXIT
-sleep 1
+for _ in $(seq 100); do [ -S /tmp/.X11-unix/X$num ] && break; sleep 0.1; done
 export DISPLAY=$display WINIT_X11_SCALE_FACTOR=1
 log=$(mktemp)
 "$bin" view "$scene" --res "$res" --target-fps "$fps" --log-frames 2>"$log" &
 viewer=$!
-until grep -q "kind=still" "$log"; do sleep 0.2; done
+for _ in $(seq 600); do grep -q "kind=still" "$log" && break; sleep 0.2; done
 win=$(xdotool search --sync --onlyvisible --pid "$viewer" --name "filtrace view" | head -1)
 xdotool mousemove --window "$win" 400 200 mousedown 1
 end=$((SECONDS + seconds))
@@ -33,7 +34,7 @@ while [ $SECONDS -lt $end ]; do
     xdotool mousemove --window "$win" $((400 + (step % 40) * 3)) 200
     sleep 0.02
 done
-xdotool mouseup 1 key Escape
+xdotool mouseup 1 windowfocus --sync "$win" key Escape
 wait $viewer
 grep "closed;" "$log"
 rm -f "$log"

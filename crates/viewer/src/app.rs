@@ -256,8 +256,9 @@ impl ViewerApp {
         }
         let failed = (self.scene_error.is_some() && self.home.is_none()) || render_error.is_some();
         if done || failed {
+            let rect = if self.opts.screenshot_window { egui::Rect::EVERYTHING } else { image };
             match self.opts.screenshot.clone() {
-                Some(path) => self.request_shot(ctx, path, image, true),
+                Some(path) => self.request_shot(ctx, path, rect, true),
                 None => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
             }
         }

@@ -9,6 +9,7 @@
 //!   pixel, so after `n` samples the film is bit for bit `filtrace render --spp n`'s.
 
 use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Instant;
 
 use filtrace_adaptive::AdaptiveParams;
@@ -34,7 +35,8 @@ pub enum FrameKind {
 /// One rendered frame with its layers and costs.
 #[derive(Clone, Debug)]
 pub struct FrameOut {
-    pub layers: LayerSet,
+    /// Shared with the published frame and saves (no copy of the images).
+    pub layers: Arc<LayerSet>,
     pub kind: FrameKind,
     /// Milliseconds of each stage, in frame order.
     pub stages: Vec<(&'static str, f64)>,
@@ -151,7 +153,12 @@ impl Engine {
         }
         stages.extend(frame.timings.stages());
         let scale = width as f32 / choice.width as f32;
-        Ok(FrameOut { layers, kind: FrameKind::Moving { scale }, stages, total_ms: ms(start) })
+        Ok(FrameOut {
+            layers: Arc::new(layers),
+            kind: FrameKind::Moving { scale },
+            stages,
+            total_ms: ms(start),
+        })
     }
 
     /// Adds `choice.spp_per_frame` samples to the still film (started again when the camera
@@ -195,7 +202,12 @@ impl Engine {
         let stages = vec![("trace", trace_ms), ("layers", ms(t1))];
         let spp = acc.spp;
         self.still = Some(acc);
-        Ok(Some(FrameOut { layers, kind: FrameKind::Still { spp }, stages, total_ms: ms(start) }))
+        Ok(Some(FrameOut {
+            layers: Arc::new(layers),
+            kind: FrameKind::Still { spp },
+            stages,
+            total_ms: ms(start),
+        }))
     }
 }
 
@@ -228,7 +240,11 @@ fn render_settings(c: &RenderChoice, width: u32, height: u32) -> RenderSettings 
 }
 
 fn pipeline_settings(c: &RenderChoice, width: u32, height: u32) -> PipelineSettings {
-    PipelineSettings { seed: c.seed, ..PipelineSettings::interactive(width, height) }
+    PipelineSettings {
+        seed: c.seed,
+        filter_direct: c.filter_direct,
+        ..PipelineSettings::interactive(width, height)
+    }
 }
 
 fn ms(t: Instant) -> f64 {

@@ -102,12 +102,11 @@ impl Navigator {
         let mut out = cam.clone();
         for event in &i.events {
             match event {
-                egui::Event::PointerButton { pos, button, pressed: true, modifiers } => {
-                    if self.drag.is_none() && image.contains(*pos) {
-                        let pan = *button != egui::PointerButton::Primary || modifiers.shift;
-                        self.drag =
-                            Some((out.clone(), *pos, if pan { DragKind::Pan } else { DragKind::Orbit }));
-                    }
+                egui::Event::PointerButton { pos, button, pressed: true, modifiers }
+                    if self.drag.is_none() && image.contains(*pos) =>
+                {
+                    let pan = *button != egui::PointerButton::Primary || modifiers.shift;
+                    self.drag = Some((out.clone(), *pos, if pan { DragKind::Pan } else { DragKind::Orbit }));
                 }
                 egui::Event::PointerMoved(pos) => out = self.dragged(&out, *pos, height_px),
                 egui::Event::PointerButton { pos, pressed: false, .. } => {

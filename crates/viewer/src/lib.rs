@@ -58,6 +58,8 @@ pub struct ViewerOptions {
     /// Headless: close after this many still frames (taking `screenshot` first).
     pub frames: Option<u32>,
     pub screenshot: Option<PathBuf>,
+    /// The screenshot holds the whole window (panel and overlay), not only the image.
+    pub screenshot_window: bool,
     /// Layer shown at start (a name of [`layers::LAYERS`]).
     pub layer: &'static str,
     /// Filter of the moving frames.
@@ -89,6 +91,7 @@ impl ViewerOptions {
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             frames: None,
             screenshot: None,
+            screenshot_window: false,
             layer: "colour",
             filter: FilterChoice::named(settings::FILTERS[0]),
             target_fps: 12.0,

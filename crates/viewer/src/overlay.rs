@@ -27,10 +27,9 @@ pub fn draw(painter: &egui::Painter, rect: egui::Rect, app: &ViewerApp) {
             format!("moving {w}x{h} ({:.0}%)  1 spp  {}", scale * 100.0, f.job.render.filter.name)
         }
     }];
+    lines.push(format!("render {:.1} fps, frame {:.1} ms", app.stats.render_fps(), f.total_ms));
     lines.push(format!(
-        "render {:.1} fps  frame {:.1} ms  UI {:.0} fps, {:.1} ms (max {:.1} while rendering)",
-        app.stats.render_fps(),
-        f.total_ms,
+        "UI {:.0} fps, {:.1} ms (max {:.1} rendering)",
         app.stats.ui_fps(),
         app.stats.last_ui_ms,
         app.stats.max_busy_frame_ms

@@ -83,6 +83,7 @@ fn filter_section(ui: &mut egui::Ui, app: &mut ViewerApp) {
         "atrous" => optional_slider(ui, &mut r.filter.iterations, 1..=8, "iterations", 5),
         _ => {}
     }
+    ui.checkbox(&mut r.filter_direct, "filter the direct light too");
     ui.checkbox(&mut r.adaptive, "adaptive sampling (importance map)");
     ui.add(Slider::new(&mut r.target_fps, 2.0..=60.0).text("target fps"));
 }

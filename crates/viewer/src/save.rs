@@ -75,6 +75,7 @@ mod tests {
         assert_eq!(c.pixels, [Color32::from_gray(5), Color32::from_gray(6)]);
         let c = crop(&shot, Rect::from_min_max(pos2(0.5, 0.5), pos2(9.0, 9.0)), 2.0);
         assert_eq!(c.size, [3, 3]);
+        assert_eq!(crop(&shot, Rect::EVERYTHING, 1.0), shot);
     }
 
     #[test]

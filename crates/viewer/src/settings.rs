@@ -41,6 +41,9 @@ pub struct RenderChoice {
     pub still: StillRenderer,
     /// The filter of moving frames, with preset and main parameters.
     pub filter: FilterChoice,
+    /// Filter the moving frames' direct light too (at 1 spp its one light sample is noisy;
+    /// the paper filters the indirect light only).
+    pub filter_direct: bool,
     /// Adaptive sampling of the moving frames' indirect light (Bauszat et al.), which also
     /// gives the importance layer.
     pub adaptive: bool,
@@ -60,6 +63,7 @@ impl RenderChoice {
             max_spp: 4096,
             still: StillRenderer::PathTracer,
             filter: FilterChoice::named(FILTERS[0]),
+            filter_direct: false,
             adaptive: false,
             target_fps: 12.0,
         }

@@ -21,12 +21,13 @@ pub struct UiStats {
     published: VecDeque<Instant>,
     /// Times of the last second's UI frames.
     ui: VecDeque<Instant>,
-    /// Longest UI frame (ms) while the worker rendered, after the first published frame.
+    /// Longest UI frame (ms) while the worker rendered, from one second after the first
+    /// published frame (before it: font atlas, first texture, llvmpipe's shader compiles).
     pub max_busy_frame_ms: f64,
     pub busy_frames: u64,
     /// Last UI frame (ms).
     pub last_ui_ms: f64,
-    started: bool,
+    started: Option<Instant>,
     /// Moving frames shown: count, summed render milliseconds and pixels.
     pub moving_frames: u64,
     moving_ms: f64,
@@ -56,14 +57,15 @@ impl UiStats {
         let Some(s) = cpu_seconds else { return };
         self.last_ui_ms = s as f64 * 1e3;
         // Start-up frames (font atlas, first texture) are not counted.
-        if worker_busy && self.started {
+        let settled = self.started.is_some_and(|t| t.elapsed() > WINDOW);
+        if worker_busy && settled {
             self.busy_frames += 1;
             self.max_busy_frame_ms = self.max_busy_frame_ms.max(self.last_ui_ms);
         }
     }
 
     pub fn frame_published(&mut self, frame: &Published) {
-        self.started = true;
+        self.started.get_or_insert_with(Instant::now);
         push(&mut self.published, Instant::now());
         if let FrameKind::Moving { .. } = frame.kind {
             self.moving_frames += 1;
@@ -97,10 +99,12 @@ pub fn describe(f: &Published, image_at: (f32, f32)) -> String {
         FrameKind::Moving { scale } => format!("kind=moving scale={scale:.3}"),
     };
     let [w, h] = f.image.size;
+    let stages: Vec<String> = f.stages.iter().map(|(s, ms)| format!("{s}={ms:.1}")).collect();
     format!(
-        "{kind} size={w}x{h} layer={} ms={:.1} image={},{} camera={}",
+        "{kind} size={w}x{h} layer={} ms={:.1} {} image={},{} camera={}",
         f.job.display.layer,
         f.total_ms,
+        stages.join(" "),
         image_at.0.round(),
         image_at.1.round(),
         format_camera(&f.job.camera)

@@ -276,13 +276,17 @@ fn render(st: &mut State, job: &Job, cancel: &AtomicBool) -> Result<Option<Frame
 }
 
 fn publish(shared: &(Mutex<Shared>, Condvar), frame: FrameOut, job: Job, st: &mut State) {
+    let t = Instant::now();
     let (image, missing) = compose(&frame.layers, &job.display);
+    let display_ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut stages = frame.stages.clone();
+    stages.push(("display", display_ms));
     let p = Published {
         image,
-        layers: Arc::new(frame.layers.clone()),
+        layers: frame.layers.clone(),
         kind: frame.kind,
-        stages: frame.stages.clone(),
-        total_ms: frame.total_ms,
+        stages,
+        total_ms: frame.total_ms + display_ms,
         job: job.clone(),
         missing,
     };

@@ -49,6 +49,9 @@ pub struct Args {
     /// PNG to save the image area to after --frames.
     #[arg(long, requires = "frames")]
     pub screenshot: Option<PathBuf>,
+    /// The --screenshot holds the whole window (panel, overlay), not only the image.
+    #[arg(long, requires = "screenshot")]
+    pub screenshot_window: bool,
     /// Filter while moving.
     #[arg(long, default_value = "guided", value_parser = ["guided", "atrous", "bilateral", "none"])]
     pub filter: String,
@@ -106,6 +109,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     o.frames = a.frames;
     o.screenshot = a.screenshot;
+    o.screenshot_window = a.screenshot_window;
     o.filter = FilterChoice::named(&a.filter);
     o.adaptive = a.adaptive;
     o.target_fps = a.target_fps;

@@ -98,7 +98,8 @@ impl Xvfb {
     }
 
     fn xdotool(&self, args: &[&str]) -> String {
-        let o = self.cmd("xdotool").args(args).output().expect("xdotool runs");
+        // `search --sync` and `windowfocus --sync` wait for ever if the window never comes.
+        let o = self.cmd("timeout").arg("30").arg("xdotool").args(args).output().expect("xdotool runs");
         assert!(o.status.success(), "xdotool {args:?}: {}", String::from_utf8_lossy(&o.stderr));
         String::from_utf8_lossy(&o.stdout).trim().to_string()
     }

@@ -53,6 +53,8 @@ pub struct ViewerApp {
     shots_taken: u32,
     /// Where the image was drawn in the last frame.
     pub(crate) last_image: egui::Rect,
+    /// `--log-frames`: the shown frame is to be logged once drawn (with its position).
+    log_pending: bool,
     outcome: Arc<Mutex<ViewerOutcome>>,
 }
 
@@ -94,6 +96,7 @@ impl ViewerApp {
             shot: None,
             shots_taken: 0,
             last_image: egui::Rect::NOTHING,
+            log_pending: false,
             outcome,
         })
     }
@@ -278,10 +281,7 @@ impl ViewerApp {
             None => self.texture = Some(ctx.load_texture("frame", frame.image.clone(), options)),
         }
         self.stats.frame_published(&frame);
-        if self.opts.log_frames {
-            let at = self.last_image.min * ctx.pixels_per_point();
-            eprintln!("filtrace view: frame {}", crate::stats::describe(&frame, (at.x, at.y)));
-        }
+        self.log_pending = self.opts.log_frames;
         self.shown = Some(frame);
     }
 
@@ -337,6 +337,10 @@ impl eframe::App for ViewerApp {
         egui::Panel::left("settings").exact_size(PANEL_WIDTH).show(ui, |ui| crate::panel::show(ui, self));
         let image = egui::CentralPanel::default().show(ui, |ui| self.draw_image(ui)).inner;
         self.last_image = image;
+        if let (true, Some(frame)) = (std::mem::take(&mut self.log_pending), &self.shown) {
+            let at = image.min * ctx.pixels_per_point();
+            eprintln!("filtrace view: frame {}", crate::stats::describe(frame, (at.x, at.y)));
+        }
         self.handle_input(&ctx, image);
         self.post_job();
         self.headless(&ctx, image);

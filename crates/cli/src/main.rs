@@ -23,6 +23,8 @@ enum Command {
     Compare(cmd::compare::Args),
     /// Run an experiment spec: every method at every sample count against a reference.
     Experiment(cmd::experiment::Args),
+    /// Interactive viewer: progressive when still, filtered at 1 spp while moving.
+    View(cmd::view::Args),
     /// Benchmarks (print a markdown table, or JSON with --json).
     Bench {
         #[command(subcommand)]
@@ -38,6 +40,7 @@ fn main() {
         Command::Denoise(a) => cmd::denoise::run(a),
         Command::Compare(a) => cmd::compare::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::Bench { which } => cmd::bench::run(which),
     };
     if let Err(e) = result {

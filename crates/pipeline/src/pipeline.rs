@@ -406,6 +406,12 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn source(&self) -> &S {
         &self.source
     }
+    /// The source, to change it between frames (the viewer moves the renderer's camera);
+    /// a source whose resolution then differs from the settings' fails the next frame with
+    /// [`PipelineError::SourceResolution`] until [`FilteredRenderer::set_settings`] follows.
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
     pub fn filter_mut(&mut self) -> &mut F {
         &mut self.filter
     }
@@ -432,6 +438,7 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
         indirect_counts: Option<&[u32]>,
     ) -> Result<&Frame, PipelineError> {
         let st = self.settings.clone();
+        check(&self.source, &st)?;
         let (w, h) = (st.width as usize, st.height as usize);
         let n = w * h;
         if let Some(c) = indirect_counts {

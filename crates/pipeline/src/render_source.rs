@@ -31,6 +31,11 @@ impl RenderSource {
     pub fn renderer(&self) -> &Renderer {
         &self.renderer
     }
+    /// The renderer, to move its camera or change its settings between frames
+    /// ([`Renderer::set_view`]) without rebuilding the BVH.
+    pub fn renderer_mut(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
     /// The scene's bounding-box diagonal, the scale filters divide positions by.
     pub fn scene_scale(&self) -> f32 {
         let d = self.renderer.scene().bounds().extent().length();

@@ -191,6 +191,25 @@ impl Renderer {
         })
     }
 
+    /// Points the camera elsewhere without rebuilding the BVH or the light set (the
+    /// viewer moves it every frame); the resolution stays.
+    pub fn set_camera(&mut self, cam: &filtrace_scene::Camera) {
+        self.camera = PinholeCamera::new(cam, self.settings.width, self.settings.height);
+    }
+
+    /// [`Renderer::set_camera`] with new settings (resolution, max depth, seed), validated
+    /// as in [`Renderer::new`]; the scene, BVH and lights are kept. On error nothing changes.
+    pub fn set_view(
+        &mut self,
+        cam: &filtrace_scene::Camera,
+        settings: RenderSettings,
+    ) -> Result<(), RenderError> {
+        settings.validate()?;
+        self.camera = PinholeCamera::new(cam, settings.width, settings.height);
+        self.settings = settings;
+        Ok(())
+    }
+
     /// Switches the estimator (the BSDF-only one is for tests and comparisons).
     pub fn with_integrator(mut self, kind: IntegratorKind) -> Self {
         self.integrator = kind;

@@ -14,3 +14,4 @@ pub mod experiment;
 pub mod output;
 pub mod render;
 pub mod render_filtered;
+pub mod view;

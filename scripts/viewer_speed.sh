@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Speed of `filtrace view` while the camera moves, in a real window under Xvfb:
+# a mouse drag held for SECONDS while the viewer renders the 1-spp filtered frames, then
+# Escape; prints the viewer's summary line (moving frames, their mean render time and
+# pixel count, and the longest UI-thread frame while a render ran).
+#
+#   scripts/viewer_speed.sh [FILTRACE_BINARY] [SCENE] [RES] [TARGET_FPS] [SECONDS]
+#
+# TARGET_FPS 1 keeps the moving frames at full resolution (the adaptive scale stays at 1);
+# the default 12 lets the resolution adapt. Needs Xvfb and xdotool.
+set -euo pipefail
+bin=${1:-target/debug/filtrace}
+scene=${2:-cornell}
+res=${3:-512x512}
+fps=${4:-1}
+seconds=${5:-10}
+num=$((300 + RANDOM % 300))
+display=":$num"
+Xvfb "$display" -screen 0 1280x1024x24 -nolisten tcp >/dev/null 2>&1 &
+xvfb=$!
+trap 'kill $xvfb 2>/dev/null || true' EXIT
+for _ in $(seq 100); do [ -S /tmp/.X11-unix/X$num ] && break; sleep 0.1; done
+export DISPLAY=$display WINIT_X11_SCALE_FACTOR=1
+log=$(mktemp)
+"$bin" view "$scene" --res "$res" --target-fps "$fps" --log-frames 2>"$log" &
+viewer=$!
+for _ in $(seq 600); do grep -q "kind=still" "$log" && break; sleep 0.2; done
+win=$(xdotool search --sync --onlyvisible --pid "$viewer" --name "filtrace view" | head -1)
+xdotool mousemove --window "$win" 400 200 mousedown 1
+end=$((SECONDS + seconds))
+step=0
+while [ $SECONDS -lt $end ]; do
+    step=$((step + 1))
+    xdotool mousemove --window "$win" $((400 + (step % 40) * 3)) 200
+    sleep 0.02
+done
+xdotool mouseup 1 windowfocus --sync "$win" key Escape
+wait $viewer
+grep "closed;" "$log"
+rm -f "$log"

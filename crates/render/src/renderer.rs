@@ -29,6 +29,7 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
+use crate::frame::FrameState;
 use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
 use crate::integrator::pool::{Pool, POOL};
 use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
@@ -153,12 +154,14 @@ pub enum TraceMode {
 
 /// A scene ready to render.
 pub struct Renderer {
-    scene: Scene,
-    settings: RenderSettings,
-    accel: SceneAccel,
-    lights: LightSet,
-    geometry: SceneGeometry,
-    camera: PinholeCamera,
+    pub(crate) scene: Scene,
+    pub(crate) settings: RenderSettings,
+    pub(crate) accel: SceneAccel,
+    pub(crate) lights: LightSet,
+    pub(crate) geometry: SceneGeometry,
+    pub(crate) camera: PinholeCamera,
+    /// The frame shown and the one before it ([`crate::frame`]).
+    pub(crate) frame: FrameState,
     integrator: IntegratorKind,
     trace_mode: TraceMode,
     ray_queries: RayQueries,
@@ -171,12 +174,20 @@ impl Renderer {
     pub fn new(scene: Scene, settings: RenderSettings) -> Result<Renderer, RenderError> {
         settings.validate()?;
         let start = Instant::now();
-        let accel = SceneAccel::build(&scene);
+        // Animated instances stay out of the merged bottom level: moving them is then a
+        // top-level update ([`crate::frame`]).
+        let accel = SceneAccel::build_with_moving(
+            &scene,
+            &filtrace_accel::BuildParams::default(),
+            filtrace_accel::Simd::best(),
+            &crate::frame::animated_instances(&scene),
+        );
         let lights = LightSet::build(&scene);
         let geometry = SceneGeometry::new(&scene);
         let build_seconds = start.elapsed().as_secs_f64();
         let cam = scene.camera.clone().unwrap_or_else(|| PinholeCamera::framing(&scene.bounds()));
         let camera = PinholeCamera::new(&cam, settings.width, settings.height);
+        let frame = FrameState::new(&scene, cam, &camera);
         Ok(Renderer {
             scene,
             settings,
@@ -184,6 +195,7 @@ impl Renderer {
             lights,
             geometry,
             camera,
+            frame,
             integrator: IntegratorKind::Path,
             trace_mode: TraceMode::default(),
             ray_queries: RayQueries::default(),

@@ -108,6 +108,32 @@ pub(crate) struct TriangleRecord {
     pub(crate) material: MaterialId,
 }
 
+impl TriangleRecord {
+    /// The record of triangle `prim` of instance `instance` of `scene`.
+    fn new(scene: &Scene, instance: u32, prim: u32) -> Self {
+        let inst = &scene.instances[instance as usize];
+        let mesh = &scene.meshes[inst.mesh as usize];
+        let [p0, p1, p2] = mesh.triangle(prim as usize).map(|v| inst.transform.transform_point3(v));
+        let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        TriangleRecord {
+            p: [p0, p1, p2],
+            n: if n.is_finite() { n } else { Vec3::ZERO },
+            scale: p0.abs().max(p1.abs()).max(p2.abs()).max_element(),
+            material: scene.material_of(instance, prim),
+        }
+    }
+}
+
+/// The inverse transpose of a transform's linear part (the identity when singular).
+fn normal_transform(t: &filtrace_core::Affine3A) -> Mat3A {
+    let inv = t.matrix3.inverse();
+    if inv.is_finite() {
+        inv.transpose()
+    } else {
+        Mat3A::IDENTITY
+    }
+}
+
 /// 32-bit words per [`TriangleRecord`]: `p` at 0..9, `n` at 9..12, `scale` at 12, the
 /// material's bits at 13.
 pub(crate) const TRI_FLOATS: usize = 14;
@@ -136,24 +162,15 @@ impl SceneGeometry {
             plain_first_tris: None,
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
-            let inv = inst.transform.matrix3.inverse();
             let mesh = &scene.meshes[inst.mesh as usize];
             g.instances.push(InstanceRecord {
-                normal_xf: if inv.is_finite() { inv.transpose() } else { Mat3A::IDENTITY },
+                normal_xf: normal_transform(&inst.transform),
                 first_tri: g.tris.len() as u32,
                 has_normals: !mesh.normals.is_empty() && mesh.normals.len() == mesh.positions.len(),
                 has_uvs: !mesh.uvs.is_empty() && mesh.uvs.len() == mesh.positions.len(),
             });
-            for p in 0..mesh.triangle_count() {
-                let [p0, p1, p2] = mesh.triangle(p).map(|v| inst.transform.transform_point3(v));
-                let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-                g.tris.push(TriangleRecord {
-                    p: [p0, p1, p2],
-                    n: if n.is_finite() { n } else { Vec3::ZERO },
-                    scale: p0.abs().max(p1.abs()).max(p2.abs()).max_element(),
-                    material: scene.material_of(ii as u32, p as u32),
-                });
-            }
+            g.tris
+                .extend((0..mesh.triangle_count() as u32).map(|p| TriangleRecord::new(scene, ii as u32, p)));
         }
         if g.instances.len() <= 8 && g.instances.iter().all(|i| !i.has_normals && !i.has_uvs) {
             let mut first = [0u32; 8];
@@ -177,6 +194,22 @@ impl SceneGeometry {
             g.small_materials = Some(Box::new(t));
         }
         g
+    }
+
+    /// Rewrites the records of instance `i` after its transform changed (a moved object in
+    /// a per-frame update): its triangles' world corners, normals and offset scales and
+    /// its normal transform, the values a fresh [`SceneGeometry::new`] would compute.
+    /// Costs one record per triangle of `i`; other instances are untouched. The scene's
+    /// meshes and instance list must be those it was built from.
+    pub fn update_instance(&mut self, scene: &Scene, i: u32) {
+        let inst = &scene.instances[i as usize];
+        let rec = &mut self.instances[i as usize];
+        rec.normal_xf = normal_transform(&inst.transform);
+        let first = rec.first_tri as usize;
+        let count = scene.meshes[inst.mesh as usize].triangle_count();
+        for (p, t) in self.tris[first..first + count].iter_mut().enumerate() {
+            *t = TriangleRecord::new(scene, i, p as u32);
+        }
     }
 
     /// For scenes of at most eight instances without vertex normals and uvs: the first

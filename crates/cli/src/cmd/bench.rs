@@ -15,6 +15,8 @@ pub enum Which {
     Pipeline(super::bench_pipeline::Args),
     /// Adaptive sampling overheads (importance map, apportionment, batches).
     Adaptive(super::bench_adaptive::Args),
+    /// Per-frame update cost and animated-vs-still sampling speed (one object moving).
+    Animation(super::bench_animation::Args),
 }
 
 pub fn run(which: Which) -> anyhow::Result<()> {
@@ -24,5 +26,6 @@ pub fn run(which: Which) -> anyhow::Result<()> {
         Which::Render(a) => super::bench_render::run(a),
         Which::Pipeline(a) => super::bench_pipeline::run(a),
         Which::Adaptive(a) => super::bench_adaptive::run(a),
+        Which::Animation(a) => super::bench_animation::run(a),
     }
 }

@@ -24,12 +24,14 @@
 
 pub mod area;
 pub mod directional;
+pub mod emission;
 pub mod environment;
 pub mod point;
 pub mod spot;
 
 pub use area::AreaLight;
 pub use directional::DirectionalLight;
+pub use emission::{EmitterKind, LeSample};
 pub use environment::EnvironmentLight;
 pub use point::PointLight;
 pub use spot::SpotLight;
@@ -80,6 +82,8 @@ pub struct LightSet {
     /// Index of the environment in `lights`, or `NONE`.
     env_index: u32,
     scene_radius: f32,
+    /// Centre of the scene's bounding sphere (origin of distant lights' emission disks).
+    scene_center: Vec3,
     skipped: usize,
     /// Per light [`AREA_FLOATS`] words for the lockstep integrator ([`LightSet::area_words`]).
     area_words: Vec<f32>,
@@ -150,7 +154,9 @@ impl LightSet {
             .fold(filtrace_core::Aabb::EMPTY, filtrace_core::Aabb::union);
         let r = if bounds.is_empty() { 0.0 } else { bounds.bounding_radius() };
         let scene_radius = if r.is_finite() && r > 0.0 { r } else { 1.0 };
-        let mut set = LightSet { env_index: NONE, scene_radius, ..Default::default() };
+        let c = bounds.center();
+        let scene_center = if !bounds.is_empty() && c.is_finite() { c } else { Vec3::ZERO };
+        let mut set = LightSet { env_index: NONE, scene_radius, scene_center, ..Default::default() };
         let mut powers = Vec::new();
 
         // Emissive triangles, world space.
@@ -387,6 +393,76 @@ impl LightSet {
             a.n
         );
         self.selection.pmf(i) * a.pdf(p, hit_point)
+    }
+
+    /// Picks a light in proportion to power with `u_select` and samples a ray leaving it
+    /// ([`emission`]); the sample's `pmf` is the selection probability.
+    #[inline]
+    pub fn sample_le(&self, u_select: f32, u_pos: Vec2, u_dir: Vec2) -> Option<LeSample> {
+        let (i, pmf) = self.selection.sample(u_select);
+        if !(pmf > 0.0) {
+            return None;
+        }
+        let s = self.sample_le_of(i, u_pos, u_dir)?;
+        Some(LeSample { pmf, ..s })
+    }
+
+    /// A ray leaving light `i` (`pmf` 1: no selection).
+    #[inline]
+    pub fn sample_le_of(&self, i: usize, u_pos: Vec2, u_dir: Vec2) -> Option<LeSample> {
+        let (c, r) = (self.scene_center, self.scene_radius);
+        match self.lights.get(i)? {
+            LightKind::Area(a) => a.sample_le(u_pos, u_dir),
+            LightKind::Point(l) => l.sample_le(u_dir),
+            LightKind::Spot(l) => l.sample_le(u_dir),
+            LightKind::Directional(l) => l.sample_le(u_pos, c, r),
+            LightKind::Environment => self.environment.as_ref()?.sample_le(u_pos, u_dir, c, r),
+        }
+    }
+
+    /// The kind of light `i`.
+    pub fn emitter_kind(&self, i: usize) -> Option<EmitterKind> {
+        Some(match self.lights.get(i)? {
+            LightKind::Area(_) => EmitterKind::Area,
+            LightKind::Point(_) => EmitterKind::Point,
+            LightKind::Spot(_) => EmitterKind::Spot,
+            LightKind::Directional(_) => EmitterKind::Directional,
+            LightKind::Environment => EmitterKind::Environment,
+        })
+    }
+
+    /// Light `i` when it is a point light.
+    pub fn point_light(&self, i: usize) -> Option<&PointLight> {
+        match self.lights.get(i) {
+            Some(LightKind::Point(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// Light `i` when it is a spot light.
+    pub fn spot_light(&self, i: usize) -> Option<&SpotLight> {
+        match self.lights.get(i) {
+            Some(LightKind::Spot(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// Light `i` when it is a directional light.
+    pub fn directional_light(&self, i: usize) -> Option<&DirectionalLight> {
+        match self.lights.get(i) {
+            Some(LightKind::Directional(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// The scene's environment light, if any.
+    pub fn environment(&self) -> Option<&EnvironmentLight> {
+        self.environment.as_ref()
+    }
+
+    /// Centre of the scene's bounding sphere (see [`Self::scene_radius`]).
+    pub fn scene_center(&self) -> Vec3 {
+        self.scene_center
     }
 
     /// Environment radiance arriving from `dir` (zero without an environment).

@@ -2,7 +2,9 @@
 //!
 //! - a [`Light`] answers for itself: [`Light::sample_li`] (a direction towards it from a
 //!   shading point, with its solid-angle density), [`Light::pdf_li`] (that density for a
-//!   direction found otherwise, for MIS), [`Light::power`] and [`Light::bounds`];
+//!   direction found otherwise, for MIS), [`Light::sample_le`] (a ray leaving it, for
+//!   light tracing and virtual point lights; [`emission`]), [`Light::power`] and
+//!   [`Light::bounds`];
 //! - a [`LightSampler`] chooses among lights ([`PowerLightSampler`]: in proportion to
 //!   power, pbrt-v4 section 12.6; an importance cache is another implementation);
 //! - a [`LightSet`] gathers the lights of a scene (every emissive triangle of every
@@ -27,6 +29,7 @@
 
 pub mod area;
 pub mod directional;
+pub mod emission;
 pub mod environment;
 pub mod point;
 pub mod sampler;
@@ -35,6 +38,7 @@ pub mod spot;
 
 pub use area::AreaLight;
 pub use directional::DirectionalLight;
+pub use emission::{EmitterKind, LeSample};
 pub use environment::EnvironmentLight;
 pub use point::PointLight;
 pub use sampler::{LightSampler, PowerLightSampler, SampledLight};
@@ -129,6 +133,38 @@ impl Light {
             Light::Area(a) => a.pdf(ctx.p, x),
             Light::Environment(e) => e.pdf(wi),
             Light::Point(_) | Light::Spot(_) | Light::Directional(_) => 0.0,
+        }
+    }
+
+    /// A ray leaving the light with its position and direction densities ([`emission`]);
+    /// distant lights start it on the disk of the scene's bounding sphere (`scene_center`,
+    /// `scene_radius`) facing them. `pmf` is 1 (no selection).
+    #[inline]
+    pub fn sample_le(
+        &self,
+        u_pos: Vec2,
+        u_dir: Vec2,
+        scene_center: Vec3,
+        scene_radius: f32,
+    ) -> Option<LeSample> {
+        let (c, r) = (scene_center, scene_radius);
+        match self {
+            Light::Area(a) => a.sample_le(u_pos, u_dir),
+            Light::Point(l) => l.sample_le(u_dir),
+            Light::Spot(l) => l.sample_le(u_dir),
+            Light::Directional(l) => l.sample_le(u_pos, c, r),
+            Light::Environment(e) => e.sample_le(u_pos, u_dir, c, r),
+        }
+    }
+
+    /// The light's kind.
+    pub fn kind(&self) -> EmitterKind {
+        match self {
+            Light::Area(_) => EmitterKind::Area,
+            Light::Point(_) => EmitterKind::Point,
+            Light::Spot(_) => EmitterKind::Spot,
+            Light::Directional(_) => EmitterKind::Directional,
+            Light::Environment(_) => EmitterKind::Environment,
         }
     }
 

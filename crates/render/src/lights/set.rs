@@ -9,8 +9,8 @@
 //! selection: the result equals a set built from the moved scene, bit for bit.
 
 use super::{
-    AreaLight, DirectionalLight, EnvironmentLight, Light, LightSample, LightSampleContext, PointLight,
-    PowerLightSampler, SpotLight,
+    AreaLight, DirectionalLight, EmitterKind, EnvironmentLight, LeSample, Light, LightSample,
+    LightSampleContext, PointLight, PowerLightSampler, SpotLight,
 };
 use filtrace_core::{Aabb, Rgb, Vec2, Vec3};
 use filtrace_scene::{Environment, Instance, Light as SceneLight, Mesh, Scene};
@@ -35,6 +35,8 @@ pub struct LightSet {
     /// Index of the environment in `lights`, or `NONE`.
     env_index: u32,
     scene_radius: f32,
+    /// Centre of the scene's bounding sphere (origin of distant lights' emission disks).
+    scene_center: Vec3,
     /// Emitters dropped among the triangles and among the explicit lights.
     skipped_area: usize,
     skipped_explicit: usize,
@@ -46,7 +48,7 @@ impl LightSet {
     pub fn build(scene: &Scene) -> LightSet {
         let mut set = LightSet { env_index: NONE, ..Default::default() };
         set.instance_bounds = scene.instances.iter().map(|i| instance_bounds(scene, i)).collect();
-        set.scene_radius = set.radius();
+        (set.scene_center, set.scene_radius) = set.bounding_sphere();
 
         // Emissive triangles, world space.
         set.instance_offset = vec![NONE; scene.instances.len()];
@@ -119,7 +121,7 @@ impl LightSet {
                 }
             }
         }
-        self.scene_radius = self.radius();
+        (self.scene_center, self.scene_radius) = self.bounding_sphere();
         self.lights.truncate(self.area_count);
         self.powers.truncate(self.area_count);
         self.add_scene_lights(scene);
@@ -132,15 +134,14 @@ impl LightSet {
         self.lights.push(light);
     }
 
-    /// Radius of the bounding sphere of the instances (1 for an empty or degenerate scene).
-    fn radius(&self) -> f32 {
+    /// Centre and radius of the bounding sphere of the instances (origin and radius 1 for
+    /// an empty or degenerate scene).
+    fn bounding_sphere(&self) -> (Vec3, f32) {
         let bounds = self.instance_bounds.iter().flatten().fold(Aabb::EMPTY, |a, b| a.union(*b));
         let r = if bounds.is_empty() { 0.0 } else { bounds.bounding_radius() };
-        if r.is_finite() && r > 0.0 {
-            r
-        } else {
-            1.0
-        }
+        let c = bounds.center();
+        let center = if !bounds.is_empty() && c.is_finite() { c } else { Vec3::ZERO };
+        (center, if r.is_finite() && r > 0.0 { r } else { 1.0 })
     }
 
     /// Appends the scene's explicit lights (after the area lights), the environments
@@ -281,6 +282,58 @@ impl LightSet {
             a.n
         );
         self.sampler.pmf_of(i) * a.pdf(p, hit_point)
+    }
+
+    /// Picks a light in proportion to power with `u_select` and samples a ray leaving it
+    /// ([`super::emission`]); the sample's `pmf` is the selection probability.
+    #[inline]
+    pub fn sample_le(&self, u_select: f32, u_pos: Vec2, u_dir: Vec2) -> Option<LeSample> {
+        let (i, pmf) = self.sampler.select(u_select);
+        if !(pmf > 0.0) {
+            return None;
+        }
+        let s = self.sample_le_of(i, u_pos, u_dir)?;
+        Some(LeSample { pmf, ..s })
+    }
+
+    /// A ray leaving light `i` (`pmf` 1: no selection).
+    #[inline]
+    pub fn sample_le_of(&self, i: usize, u_pos: Vec2, u_dir: Vec2) -> Option<LeSample> {
+        self.lights.get(i)?.sample_le(u_pos, u_dir, self.scene_center, self.scene_radius)
+    }
+
+    /// The kind of light `i`.
+    pub fn emitter_kind(&self, i: usize) -> Option<EmitterKind> {
+        Some(self.lights.get(i)?.kind())
+    }
+
+    /// Light `i` when it is a point light.
+    pub fn point_light(&self, i: usize) -> Option<&PointLight> {
+        match self.lights.get(i) {
+            Some(Light::Point(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// Light `i` when it is a spot light.
+    pub fn spot_light(&self, i: usize) -> Option<&SpotLight> {
+        match self.lights.get(i) {
+            Some(Light::Spot(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// Light `i` when it is a directional light.
+    pub fn directional_light(&self, i: usize) -> Option<&DirectionalLight> {
+        match self.lights.get(i) {
+            Some(Light::Directional(l)) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// Centre of the scene's bounding sphere (see [`Self::scene_radius`]).
+    pub fn scene_center(&self) -> Vec3 {
+        self.scene_center
     }
 
     /// Environment radiance arriving from `dir` (zero without an environment).

@@ -114,6 +114,9 @@ fn light_interface_and_sampler_compose_to_the_set() {
         let Some(chosen) = lights.sampler().sample(&ctx, u_select) else { panic!("no light chosen") };
         assert_eq!(chosen.p, lights.sampler().pmf(&ctx, chosen.light));
         let light = lights.light(chosen.light).unwrap();
+        let le = light.sample_le(u, Vec2::new(u.y, u.x), lights.scene_center(), lights.scene_radius());
+        assert_eq!(le, lights.sample_le_of(chosen.light, u, Vec2::new(u.y, u.x)));
+        assert_eq!(le.map(|s| s.kind), Some(light.kind()));
         let from_set = lights.sample_li(ctx.p, u_select, u);
         let Some(ls) = light.sample_li(&ctx, u) else {
             assert!(from_set.is_none());

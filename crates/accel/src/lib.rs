@@ -793,67 +793,6 @@ impl SceneAccel {
         }
     }
 
-    /// Everything rebuilt from `scene`, keeping the instances told to move apart.
-    fn rebuild_all(&mut self, scene: &Scene) {
-        let mut moving = std::mem::take(&mut self.moving);
-        moving.resize(scene.instances.len(), false);
-        *self = Self::build_keeping_apart(scene, &self.params.clone(), self.simd, moving);
-    }
-
-    /// The cost of a frame follows what moved: the records of the instances `moved` (whose
-    /// transforms in `scene` changed) are recomputed and the top level is refit, or rebuilt
-    /// when the refit degraded it (SAH cost beyond [`REBUILD_GROWTH`] times its cost when
-    /// built) or an instance became (un)hittable. Like [`SceneAccel::update_transforms`],
-    /// rebuilds everything when the scene's instances or meshes changed or a merged
-    /// instance moved. Indices out of range also rebuild everything.
-    pub fn update_instances(&mut self, scene: &Scene, moved: &[u32]) -> TopLevelUpdate {
-        if moved.is_empty() {
-            return TopLevelUpdate::Unchanged;
-        }
-        let same_structure = scene.instances.len() == self.instances.len()
-            && scene.meshes.len() == self.blas.len()
-            && moved.iter().all(|&i| {
-                scene.instances.get(i as usize).is_some_and(|inst| {
-                    inst.mesh == self.instances[i as usize].mesh
-                        && (!self.is_merged[i as usize] || inst.transform == Affine3A::IDENTITY)
-                })
-            });
-        if !same_structure {
-            self.rebuild_all(scene);
-            return TopLevelUpdate::Full;
-        }
-        let mut live_changed = false;
-        for &i in moved {
-            let rec = self.instance_record(&scene.instances[i as usize], self.is_merged[i as usize]);
-            live_changed |= rec.bounds.is_empty() != self.instances[i as usize].bounds.is_empty();
-            self.instances[i as usize] = rec;
-        }
-        let update = if live_changed { TopLevelUpdate::Rebuilt } else { self.refit_top_level() };
-        if update == TopLevelUpdate::Rebuilt {
-            self.build_tlas();
-        }
-        #[cfg(debug_assertions)]
-        if let Err(e) = self.validate_top_level() {
-            panic!("BVH invariant broken after update_instances: {e}");
-        }
-        update
-    }
-
-    /// Refits the top level to the instances' records; [`TopLevelUpdate::Rebuilt`] when
-    /// the refit tree is too much worse than a rebuilt one would be (the caller rebuilds).
-    fn refit_top_level(&mut self) -> TopLevelUpdate {
-        let (order, instances, merged) = (&self.tlas_order, &self.instances, &self.merged.bounds);
-        let object_bounds = |o: u32| if o == MERGED { *merged } else { instances[o as usize].bounds };
-        refit::refit(&mut self.tlas, |first, count| {
-            (first..first + count).map(|k| object_bounds(order[k as usize])).fold(Aabb::EMPTY, Aabb::union)
-        });
-        if refit::sah_cost(&self.tlas) > REBUILD_GROWTH * self.tlas_build_cost {
-            TopLevelUpdate::Rebuilt
-        } else {
-            TopLevelUpdate::Refit
-        }
-    }
-
     /// The top-level record of `inst` (merged into `merged` or not).
     fn instance_record(&self, inst: &filtrace_scene::Instance, merged: bool) -> InstanceRecord {
         let blas = self.blas.get(inst.mesh as usize);

@@ -11,9 +11,10 @@
 //!   ([`SceneGeometry::update_instance`]). Instances that did not move cost nothing.
 //! - instances animated by the scene are never merged into the identity instances' bottom
 //!   level at build time, so moving them never rebuilds a bottom level;
-//! - the light set is rebuilt only when an emitting instance or a light moved, or the
-//!   scene's bounding sphere (the power of distant lights) changed: [`rebuild_lights`]
-//!   stands in for a per-emitter update of the light set until it has one;
+//! - the light set is updated only when an emitting instance or a light moved, or the
+//!   scene's bounding sphere (the power of distant lights) changed
+//!   ([`crate::lights::LightSet::update_instances`] re-derives only the moved instances'
+//!   area lights); the lockstep tables made from it follow;
 //! - a camera change touches no geometry.
 //!
 //! The image of a frame reached by updates is the image of a renderer built from scratch
@@ -26,7 +27,6 @@
 //! frame, which the [`crate::motion`] AOV reprojects into.
 
 use crate::camera::PinholeCamera;
-use crate::lights::LightSet;
 use crate::renderer::{RenderError, Renderer};
 use filtrace_accel::TopLevelUpdate;
 use filtrace_core::{Aabb, Affine3A};
@@ -56,8 +56,8 @@ pub struct FrameUpdate {
     pub top_level: TopLevelUpdate,
     /// Per-triangle shading records rewritten (the moved instances' triangles).
     pub triangle_records: usize,
-    /// The light set was rebuilt (an emitter or light moved, or the scene's bounds).
-    pub lights_rebuilt: bool,
+    /// The light set was updated (an emitter or light moved, or the scene's bounds).
+    pub lights_updated: bool,
     pub camera_moved: bool,
     /// Wall time of the update.
     pub seconds: f64,
@@ -99,8 +99,10 @@ pub(crate) struct FrameState {
     pub(crate) prev_transforms: Vec<Affine3A>,
     /// Instances moved by the last update: their `prev_transforms` catch up at the next.
     moved_last: Vec<u32>,
-    /// Per instance: it may have emissive triangles (moving it rebuilds the light set).
+    /// Per instance: it may have emissive triangles (moving it updates the light set).
     emitting: Vec<bool>,
+    /// Instances moved since the light set was last updated.
+    lights_stale: Vec<u32>,
     /// Per mesh: object-space bounds, for the scene's bounding sphere; empty when the
     /// scene has no distant light (whose power depends on that sphere).
     mesh_bounds: Vec<Aabb>,
@@ -121,6 +123,7 @@ impl FrameState {
             prev_transforms: scene.instances.iter().map(|i| i.transform).collect(),
             moved_last: Vec::new(),
             emitting: emitting_instances(scene),
+            lights_stale: Vec::new(),
             mesh_bounds: if distant { scene.meshes.iter().map(|m| m.bounds()).collect() } else { Vec::new() },
         }
     }
@@ -140,13 +143,6 @@ fn emitting_instances(scene: &Scene) -> Vec<bool> {
             None => mesh_emits.get(i.mesh as usize).copied().unwrap_or(false),
         })
         .collect()
-}
-
-/// The light set of the posed scene, built anew: the one step of a frame update whose cost
-/// does not follow what moved (O(emissive triangles + instances)). To be replaced by a
-/// per-emitter update of [`LightSet`] once it has one.
-fn rebuild_lights(scene: &Scene) -> LightSet {
-    LightSet::build(scene)
 }
 
 impl Renderer {
@@ -185,11 +181,7 @@ impl Renderer {
                 self.scene.meshes[self.scene.instances[i as usize].mesh as usize].triangle_count();
         }
         let lights_moved = self.move_lights(&pose.lights);
-        let emitter_moved = moved.iter().any(|&i| self.frame.emitting[i as usize]);
-        let lights_rebuilt = lights_moved || emitter_moved || (!moved.is_empty() && self.radius_changed());
-        if lights_rebuilt {
-            self.lights = rebuild_lights(&self.scene);
-        }
+        let lights_updated = self.update_lights(&moved, lights_moved);
         let camera_moved = pose.camera.as_ref().is_some_and(|c| self.move_camera(c));
         self.frame.desc.time = pose.time;
         self.frame.moved_last = moved;
@@ -197,7 +189,7 @@ impl Renderer {
             moved_instances: self.frame.moved_last.len(),
             top_level,
             triangle_records,
-            lights_rebuilt,
+            lights_updated,
             camera_moved,
             seconds: start.elapsed().as_secs_f64(),
         })
@@ -270,8 +262,26 @@ impl Renderer {
         true
     }
 
+    /// Brings the light set and the lockstep tables made from it up to date when an
+    /// emitter or light moved or the scene's bounding sphere changed; true when it did.
+    /// Other moves are remembered and handed to the next update (the light set keeps
+    /// per-instance bounds).
+    fn update_lights(&mut self, moved: &[u32], lights_moved: bool) -> bool {
+        self.frame.lights_stale.extend_from_slice(moved);
+        let emitter_moved = moved.iter().any(|&i| self.frame.emitting[i as usize]);
+        if !(lights_moved || emitter_moved || (!moved.is_empty() && self.radius_changed())) {
+            return false;
+        }
+        let mut stale = std::mem::take(&mut self.frame.lights_stale);
+        stale.sort_unstable();
+        stale.dedup();
+        self.lights.update_instances(&self.scene, &stale);
+        self.lockstep_tables.update_lights(&self.lights);
+        true
+    }
+
     /// Whether the bounding sphere the light set gives distant lights their power by
-    /// differs from the posed scene's (computed as [`LightSet::build`] does; only for
+    /// differs from the posed scene's (computed as `LightSet::build` does; only for
     /// scenes with distant lights, else false).
     fn radius_changed(&self) -> bool {
         let bounds = &self.frame.mesh_bounds;

@@ -66,7 +66,7 @@ pub struct UpdateTimings {
     pub refits: usize,
     pub rebuilds: usize,
     pub full_rebuilds: usize,
-    pub lights_rebuilt: usize,
+    pub lights_updated: usize,
     /// Triangle records rewritten per frame (the moved instances' triangles).
     pub triangle_records: usize,
 }
@@ -95,7 +95,7 @@ pub fn time_updates(
         refits: count(TopLevelUpdate::Refit),
         rebuilds: count(TopLevelUpdate::Rebuilt),
         full_rebuilds: count(TopLevelUpdate::Full),
-        lights_rebuilt: updates.iter().filter(|u| u.lights_rebuilt).count(),
+        lights_updated: updates.iter().filter(|u| u.lights_updated).count(),
         triangle_records: updates.iter().map(|u| u.triangle_records).max().unwrap_or(0),
     })
 }

@@ -30,7 +30,7 @@
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
 use crate::frame::FrameState;
-use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
+use crate::integrator::lockstep::{self, LaneStats, LockstepContext, LockstepTables, RayQueries};
 use crate::integrator::pool::{Pool, POOL};
 use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
@@ -159,6 +159,7 @@ pub struct Renderer {
     pub(crate) accel: SceneAccel,
     pub(crate) lights: LightSet,
     pub(crate) geometry: SceneGeometry,
+    pub(crate) lockstep_tables: LockstepTables,
     pub(crate) camera: PinholeCamera,
     /// The frame shown and the one before it ([`crate::frame`]).
     pub(crate) frame: FrameState,
@@ -184,6 +185,7 @@ impl Renderer {
         );
         let lights = LightSet::build(&scene);
         let geometry = SceneGeometry::new(&scene);
+        let lockstep_tables = LockstepTables::new(&scene, &geometry, &lights);
         let build_seconds = start.elapsed().as_secs_f64();
         let cam = scene.camera.clone().unwrap_or_else(|| PinholeCamera::framing(&scene.bounds()));
         let camera = PinholeCamera::new(&cam, settings.width, settings.height);
@@ -194,6 +196,7 @@ impl Renderer {
             accel,
             lights,
             geometry,
+            lockstep_tables,
             camera,
             frame,
             integrator: IntegratorKind::Path,
@@ -427,6 +430,7 @@ impl Renderer {
         let width = self.settings.width as usize;
         let lc = LockstepContext {
             ctx: self.context(),
+            tables: &self.lockstep_tables,
             params: self.path_params(),
             camera: &self.camera,
             queries: self.ray_queries,

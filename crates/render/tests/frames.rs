@@ -81,7 +81,7 @@ fn a_static_scene_as_frame_n_is_the_still_render() {
     let scene = cornell();
     let mut r = Renderer::new(scene.clone(), settings(4)).unwrap();
     let u = r.prepare_frame(7).unwrap();
-    assert_eq!((u.moved_instances, u.lights_rebuilt, u.camera_moved), (0, false, false));
+    assert_eq!((u.moved_instances, u.lights_updated, u.camera_moved), (0, false, false));
     assert_eq!(r.frame().index, 7);
     assert_same_as_built(r, &scene, 7, 4);
 
@@ -110,7 +110,7 @@ fn moved_instances_render_as_the_scene_built_from_scratch() {
     for (frame, light_moves) in [(2, true), (3, true), (4, true), (8, false), (10, false)] {
         let u = r.prepare_frame(frame).unwrap();
         assert_eq!(u.moved_instances, 1 + light_moves as usize, "frame {frame}: {u:?}");
-        assert_eq!(u.lights_rebuilt, light_moves, "frame {frame}: {u:?}");
+        assert_eq!(u.lights_updated, light_moves, "frame {frame}: {u:?}");
         assert_eq!(u.triangle_records, 10 + 2 * light_moves as usize, "frame {frame}: {u:?}");
         r = assert_same_as_built(r, &scene, frame, 4);
     }
@@ -139,7 +139,7 @@ fn a_camera_update_renders_as_a_renderer_built_with_that_camera() {
     animate(&mut eyes, &[], Some(vec![moved.eye, Camera::cornell().eye]));
     let mut r = Renderer::new(eyes, settings(1)).unwrap();
     let u = r.prepare_frame(5).unwrap();
-    assert!(u.camera_moved && u.moved_instances == 0 && !u.lights_rebuilt, "{u:?}");
+    assert!(u.camera_moved && u.moved_instances == 0 && !u.lights_updated, "{u:?}");
     assert_eq!(u.top_level, filtrace_accel::TopLevelUpdate::Unchanged);
 }
 

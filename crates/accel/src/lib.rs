@@ -77,6 +77,7 @@ mod avx2_packet;
 pub mod bench;
 mod brute;
 mod packet;
+mod refit;
 pub mod sah;
 pub mod testmesh;
 mod tri4;
@@ -625,6 +626,12 @@ pub struct SceneAccel {
     merged_refs: Vec<(u32, u32)>,
     /// Per scene instance: part of `merged`.
     is_merged: Vec<bool>,
+    /// Per scene instance: told to move ([`SceneAccel::build_with_moving`]), so never
+    /// merged (moving it then costs a top-level update, not a full rebuild).
+    moving: Vec<bool>,
+    /// [`refit::sah_cost`] of the top level when it was last built: refits that let it
+    /// grow past [`REBUILD_GROWTH`] times this rebuild it.
+    tlas_build_cost: f64,
     /// One record per scene instance, in scene order.
     instances: Vec<InstanceRecord>,
     /// Top level over the hittable instances.
@@ -641,6 +648,25 @@ pub struct SceneAccel {
 
 /// Top-level object id of the merged identity instances.
 const MERGED: u32 = u32::MAX;
+
+/// A refit top level whose SAH cost grew past this factor of its cost when built is
+/// rebuilt instead (Kopta et al. 2012 rebuild on SAH growth too).
+pub const REBUILD_GROWTH: f64 = 1.3;
+
+/// What [`SceneAccel::update_instances`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum TopLevelUpdate {
+    /// Nothing moved.
+    Unchanged,
+    /// The moved instances' records and the top-level boxes recomputed, tree kept.
+    Refit,
+    /// The top level rebuilt: a refit would have grown its SAH cost past
+    /// [`REBUILD_GROWTH`], or an instance became hittable or unhittable.
+    Rebuilt,
+    /// Everything rebuilt: instances or meshes were added or removed, or an instance
+    /// merged at build time moved (see [`SceneAccel::update_transforms`]).
+    Full,
+}
 
 impl SceneAccel {
     /// Builds with the default parameters ([`BuildParams::balanced`]).
@@ -659,12 +685,33 @@ impl SceneAccel {
     /// an AVX2 CPU); a kernel this CPU lacks falls back to [`Simd::Sse`] (see
     /// [`SceneAccel::simd`]).
     pub fn build_simd(scene: &Scene, params: &BuildParams, simd: Simd) -> Self {
+        Self::build_with_moving(scene, params, simd, &[])
+    }
+
+    /// [`SceneAccel::build_simd`] for a scene whose instances `moving` will move (an
+    /// animation's): they are never merged into the identity instances' bottom level, so
+    /// that moving them is a top-level update ([`SceneAccel::update_instances`]). Indices
+    /// out of range are ignored.
+    pub fn build_with_moving(scene: &Scene, params: &BuildParams, simd: Simd, moving: &[u32]) -> Self {
+        let mut keep_apart = vec![false; scene.instances.len()];
+        for &i in moving {
+            if let Some(m) = keep_apart.get_mut(i as usize) {
+                *m = true;
+            }
+        }
+        Self::build_keeping_apart(scene, params, simd, keep_apart)
+    }
+
+    fn build_keeping_apart(scene: &Scene, params: &BuildParams, simd: Simd, moving: Vec<bool>) -> Self {
         let simd = if simd.available() { simd } else { Simd::Sse };
         let mesh_of = |i: &filtrace_scene::Instance| scene.meshes.get(i.mesh as usize);
         let mut is_merged: Vec<bool> = scene
             .instances
             .iter()
-            .map(|i| i.transform == Affine3A::IDENTITY && mesh_of(i).is_some_and(|m| m.triangle_count() > 0))
+            .zip(&moving)
+            .map(|(i, &m)| {
+                !m && i.transform == Affine3A::IDENTITY && mesh_of(i).is_some_and(|m| m.triangle_count() > 0)
+            })
             .collect();
         if is_merged.iter().filter(|&&m| m).count() < 2 {
             is_merged.fill(false);
@@ -702,6 +749,8 @@ impl SceneAccel {
             merged,
             merged_refs,
             is_merged,
+            moving,
+            tlas_build_cost: 0.0,
             instances: Vec::new(),
             tlas: Vec::new(),
             tlas_order: Vec::new(),
@@ -734,7 +783,7 @@ impl SceneAccel {
                 .zip(&self.is_merged)
                 .all(|(a, &m)| !m || a.transform == Affine3A::IDENTITY);
         if !same_structure {
-            *self = Self::build_simd(scene, &self.params.clone(), self.simd);
+            self.rebuild_all(scene);
             return;
         }
         self.build_top_level(scene);
@@ -744,34 +793,47 @@ impl SceneAccel {
         }
     }
 
+    /// The top-level record of `inst` (merged into `merged` or not).
+    fn instance_record(&self, inst: &filtrace_scene::Instance, merged: bool) -> InstanceRecord {
+        let blas = self.blas.get(inst.mesh as usize);
+        match (blas, invert_transform(&inst.transform)) {
+            (Some(b), Some((inv, identity))) if b.tri_count > 0 && !merged => InstanceRecord {
+                mesh: inst.mesh,
+                world_to_object: inv,
+                identity,
+                bounds: b.bounds.transformed(&inst.transform),
+            },
+            _ => InstanceRecord {
+                mesh: inst.mesh,
+                world_to_object: Affine3A::IDENTITY,
+                identity: true,
+                bounds: Aabb::EMPTY,
+            },
+        }
+    }
+
+    /// True when instance `i` was merged into the identity instances' bottom level.
+    pub fn is_merged(&self, i: u32) -> bool {
+        self.is_merged.get(i as usize).copied().unwrap_or(false)
+    }
+
     fn build_top_level(&mut self, scene: &Scene) {
         self.instances = scene
             .instances
             .iter()
             .zip(&self.is_merged)
-            .map(|(inst, &merged)| {
-                let blas = self.blas.get(inst.mesh as usize);
-                match (blas, invert_transform(&inst.transform)) {
-                    (Some(b), Some((inv, identity))) if b.tri_count > 0 && !merged => InstanceRecord {
-                        mesh: inst.mesh,
-                        world_to_object: inv,
-                        identity,
-                        bounds: b.bounds.transformed(&inst.transform),
-                    },
-                    _ => InstanceRecord {
-                        mesh: inst.mesh,
-                        world_to_object: Affine3A::IDENTITY,
-                        identity: true,
-                        bounds: Aabb::EMPTY,
-                    },
-                }
-            })
+            .map(|(inst, &merged)| self.instance_record(inst, merged))
             .collect();
         self.triangle_count = scene
             .instances
             .iter()
             .map(|i| scene.meshes.get(i.mesh as usize).map_or(0, |m| m.triangle_count()))
             .sum();
+        self.build_tlas();
+    }
+
+    /// Builds the top level over the hittable objects' current bounds.
+    fn build_tlas(&mut self) {
         let mut objects: Vec<u32> = (0..self.instances.len() as u32)
             .filter(|&i| !self.instances[i as usize].bounds.is_empty())
             .collect();
@@ -787,6 +849,7 @@ impl SceneAccel {
             root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
         self.tlas_order = order.iter().map(|&k| objects[k as usize]).collect();
         self.single = (objects.len() == 1).then(|| objects[0]);
+        self.tlas_build_cost = refit::sah_cost(&self.tlas);
     }
 
     fn object_bounds(&self, object: u32) -> Aabb {
@@ -946,6 +1009,11 @@ impl SceneAccel {
             b.validate().map_err(|e| format!("mesh {m}: {e}"))?;
         }
         self.merged.validate().map_err(|e| format!("merged identity instances: {e}"))?;
+        self.validate_top_level()
+    }
+
+    /// The top-level part of [`SceneAccel::validate`] (cheap: run after every update).
+    fn validate_top_level(&self) -> Result<(), String> {
         let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count()
             + (self.merged.tri_count > 0) as usize;
         if self.tlas_order.len() != live {

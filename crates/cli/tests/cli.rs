@@ -88,6 +88,12 @@ fn render_writes_every_layer_and_a_complete_json_summary() {
         "variance.R",
         "variance.G",
         "variance.B",
+        "motion.X",
+        "motion.Y",
+        "prev_depth.Z",
+        "prev_normal.X",
+        "prev_normal.Y",
+        "prev_normal.Z",
     ] {
         assert!(exr.channel(ch).is_some(), "missing channel {ch}: {:?}", exr.channel_names());
     }
@@ -241,6 +247,26 @@ fn bench_render_reports_the_same_image_at_every_thread_count() {
     }
     // Deterministic sampling: the mean colour does not depend on the thread count.
     assert_eq!(rows[0]["mean_rgb"], rows[1]["mean_rgb"]);
+}
+
+/// `bench animation` on a small meadow: every frame update is a top-level refit or
+/// rebuild (never a full one), and the animated frame renders as the same frame built
+/// still (the same mean colour).
+#[test]
+fn bench_animation_updates_the_top_level_only_and_matches_the_still_frame() {
+    let args = ["bench", "animation", "--blades", "500", "--rounds", "1", "--res", "16x12", "--spp", "1"];
+    let out = run(bin().args(args).arg("--json"));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value =
+        serde_json::from_slice(&out.stdout).expect("bench animation --json prints JSON");
+    assert_eq!(v["update"]["frames"], 47);
+    assert_eq!(v["update"]["full_rebuilds"], 0);
+    assert_eq!(v["update"]["lights_updated"], 0, "the ball does not emit");
+    assert_eq!(v["update"]["triangle_records"], 960);
+    assert!(v["full_build_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(v["animated_mean_rgb"], v["still_mean_rgb"]);
+    let table = run(bin().args(args));
+    assert!(String::from_utf8_lossy(&table.stdout).contains("| update, mean |"));
 }
 
 /// `--trace scalar` and `--trace lockstep` write the same EXR, byte for byte (the two

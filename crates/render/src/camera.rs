@@ -89,6 +89,41 @@ impl PinholeCamera {
         Ray::new(self.eye, dir)
     }
 
+    /// The raster position at which world point `p` is seen (the inverse of
+    /// [`PinholeCamera::generate_ray`]: pixel `(x, y)` spans `[x, x + 1) x [y, y + 1)`);
+    /// `None` when `p` is not in front of the eye.
+    #[inline]
+    pub fn raster_of(&self, p: Vec3) -> Option<Vec2> {
+        self.raster_of_direction(p - self.eye)
+    }
+
+    /// The raster position of the point at infinity in direction `v` (where a distant
+    /// background is seen); `None` when `v` does not point ahead of the camera.
+    #[inline]
+    pub fn raster_of_direction(&self, v: Vec3) -> Option<Vec2> {
+        let z = v.dot(self.forward);
+        if z.is_nan() || z <= 0.0 {
+            return None;
+        }
+        // The axes are orthogonal: each screen coordinate is one projection.
+        let sx = v.dot(self.right_half) / (z * self.right_half.length_squared());
+        let sy = v.dot(self.up_half) / (z * self.up_half.length_squared());
+        Some(Vec2::new((sx + 1.0) / self.two_over_size.x, (1.0 - sy) / self.two_over_size.y))
+    }
+
+    /// The same view for an image of `width x height` (the vertical field of view kept).
+    pub fn resized(&self, width: u32, height: u32) -> Self {
+        let (w, h) = (width.max(1), height.max(1));
+        let aspect_change = (w as f32 / h as f32) / (self.width as f32 / self.height as f32);
+        PinholeCamera {
+            right_half: self.right_half * aspect_change,
+            width: w,
+            height: h,
+            two_over_size: Vec2::new(2.0 / w as f32, 2.0 / h as f32),
+            ..self.clone()
+        }
+    }
+
     /// The ray of sample `index` of pixel `(px, py)`: sample 0 through the pixel centre (the
     /// guide ray), the others at `jitter`.
     #[inline]
@@ -121,6 +156,29 @@ mod tests {
         // Looking down +z with up +y, the image's right is world -x (right-handed look-at:
         // the Cornell box's red wall at x = 550 appears on the left).
         assert!(right.dir.x < 0.0);
+    }
+
+    /// `raster_of` inverts `generate_ray`, for points at any distance, and rejects points
+    /// behind the eye; `resized` is the camera built at the new size.
+    #[test]
+    fn raster_of_inverts_generate_ray() {
+        let cam = PinholeCamera::new(&Camera::cornell(), 64, 32);
+        for (x, y, off) in [(0, 0, Vec2::ZERO), (63, 31, Vec2::splat(0.99)), (17, 9, Vec2::new(0.25, 0.75))] {
+            let ray = cam.generate_ray(x, y, off);
+            // From 10 units on: `eye + dist * dir` rounds by ~1e-4 at the eye's ~800.
+            for dist in [10.0, 100.0, 5000.0] {
+                let r = cam.raster_of(ray.origin + dist * ray.dir).unwrap();
+                let want = Vec2::new(x as f32 + off.x, y as f32 + off.y);
+                assert!((r - want).abs().max_element() < 1e-3, "{r} vs {want} at {dist}");
+            }
+            let far = cam.raster_of(ray.origin + 1e4 * ray.dir).unwrap();
+            assert!((cam.raster_of_direction(ray.dir).unwrap() - far).length() < 1e-3);
+            assert!(cam.raster_of(ray.origin - ray.dir).is_none());
+        }
+        let resized = cam.resized(30, 20);
+        let built = PinholeCamera::new(&Camera::cornell(), 30, 20);
+        let ray = built.generate_ray(5, 7, Vec2::splat(0.5));
+        assert!((resized.raster_of(ray.origin + ray.dir).unwrap() - Vec2::new(5.5, 7.5)).length() < 1e-3);
     }
 
     #[test]

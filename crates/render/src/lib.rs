@@ -13,17 +13,22 @@
 pub mod bsdf;
 pub mod camera;
 pub mod film;
+pub mod frame;
+pub mod frame_bench;
 pub mod integrator;
 pub mod lights;
 pub mod memory;
+pub mod motion;
 pub mod renderer;
 pub mod surface;
 pub mod texture;
 
 pub use camera::PinholeCamera;
 pub use film::{Aovs, Film, VisibleSurface};
+pub use frame::{FrameDesc, FrameError, FrameUpdate};
 pub use integrator::lockstep::{LaneStats, RayQueries};
 pub use integrator::PathParams;
+pub use motion::MotionAov;
 pub use renderer::{
     render_bench, BenchResult, IntegratorKind, RenderError, RenderSettings, Renderer, TraceMode,
 };

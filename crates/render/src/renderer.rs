@@ -29,7 +29,8 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
-use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
+use crate::frame::FrameState;
+use crate::integrator::lockstep::{self, LaneStats, LockstepContext, LockstepTables, RayQueries};
 use crate::integrator::pool::{Pool, POOL};
 use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
@@ -153,12 +154,15 @@ pub enum TraceMode {
 
 /// A scene ready to render.
 pub struct Renderer {
-    scene: Scene,
-    settings: RenderSettings,
-    accel: SceneAccel,
-    lights: LightSet,
-    geometry: SceneGeometry,
-    camera: PinholeCamera,
+    pub(crate) scene: Scene,
+    pub(crate) settings: RenderSettings,
+    pub(crate) accel: SceneAccel,
+    pub(crate) lights: LightSet,
+    pub(crate) geometry: SceneGeometry,
+    pub(crate) lockstep_tables: LockstepTables,
+    pub(crate) camera: PinholeCamera,
+    /// The frame shown and the one before it ([`crate::frame`]).
+    pub(crate) frame: FrameState,
     integrator: IntegratorKind,
     trace_mode: TraceMode,
     ray_queries: RayQueries,
@@ -171,30 +175,35 @@ impl Renderer {
     pub fn new(scene: Scene, settings: RenderSettings) -> Result<Renderer, RenderError> {
         settings.validate()?;
         let start = Instant::now();
-        let accel = SceneAccel::build(&scene);
+        // Animated instances stay out of the merged bottom level: moving them is then a
+        // top-level update ([`crate::frame`]).
+        let accel = SceneAccel::build_with_moving(
+            &scene,
+            &filtrace_accel::BuildParams::default(),
+            filtrace_accel::Simd::best(),
+            &crate::frame::animated_instances(&scene),
+        );
         let lights = LightSet::build(&scene);
         let geometry = SceneGeometry::new(&scene);
+        let lockstep_tables = LockstepTables::new(&scene, &geometry, &lights);
         let build_seconds = start.elapsed().as_secs_f64();
         let cam = scene.camera.clone().unwrap_or_else(|| PinholeCamera::framing(&scene.bounds()));
         let camera = PinholeCamera::new(&cam, settings.width, settings.height);
+        let frame = FrameState::new(&scene, cam, &camera);
         Ok(Renderer {
             scene,
             settings,
             accel,
             lights,
             geometry,
+            lockstep_tables,
             camera,
+            frame,
             integrator: IntegratorKind::Path,
             trace_mode: TraceMode::default(),
             ray_queries: RayQueries::default(),
             build_seconds,
         })
-    }
-
-    /// Points the camera elsewhere without rebuilding the BVH or the light set (the
-    /// viewer moves it every frame); the resolution stays.
-    pub fn set_camera(&mut self, cam: &filtrace_scene::Camera) {
-        self.camera = PinholeCamera::new(cam, self.settings.width, self.settings.height);
     }
 
     /// [`Renderer::set_camera`] with new settings (resolution, max depth, seed), validated
@@ -205,8 +214,15 @@ impl Renderer {
         settings: RenderSettings,
     ) -> Result<(), RenderError> {
         settings.validate()?;
-        self.camera = PinholeCamera::new(cam, settings.width, settings.height);
-        self.settings = settings;
+        let (width, height) = (settings.width, settings.height);
+        self.settings = RenderSettings { width: self.settings.width, height: self.settings.height, ..settings };
+        if (width, height) != (self.settings.width, self.settings.height) {
+            match self.set_resolution(width, height) {
+                Err(crate::frame::FrameError::Resolution(e)) => return Err(e),
+                r => r.expect("set_resolution fails only on a resolution"),
+            }
+        }
+        self.set_camera(cam);
         Ok(())
     }
 
@@ -434,6 +450,7 @@ impl Renderer {
         let width = self.settings.width as usize;
         let lc = LockstepContext {
             ctx: self.context(),
+            tables: &self.lockstep_tables,
             params: self.path_params(),
             camera: &self.camera,
             queries: self.ray_queries,

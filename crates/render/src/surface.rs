@@ -54,31 +54,6 @@ pub struct SceneGeometry {
     tris: Vec<TriangleRecord>,
     /// Per material: its BSDF when it does not depend on `uv`, else `None`.
     constant_bsdfs: Vec<Option<SurfaceBsdf>>,
-    /// For scenes with at most eight materials: their flags and Lambert reflectances as
-    /// eight-entry tables.
-    small_materials: Option<Box<SmallMaterials>>,
-    /// For scenes of at most eight instances, none with vertex normals or uvs: each
-    /// instance's first row in `tris` (lane `i` = instance `i`).
-    plain_first_tris: Option<[u32; 8]>,
-}
-
-/// [`SmallMaterials::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
-/// constant_diffuse`] is `Some`).
-pub(crate) const MAT_DIFFUSE: u32 = 1;
-/// Flag: the material emits (`is_emissive()` and a non-zero emission).
-pub(crate) const MAT_EMITS: u32 = 2;
-/// Flag: the emission is two-sided.
-pub(crate) const MAT_TWO_SIDED: u32 = 4;
-
-/// The materials of a scene with at most eight of them as eight-entry tables (lane `m` =
-/// material `m`), for the lockstep integrator's lookups by `vpermps`
-/// ([`crate::integrator::lanes::lookup8`]): flags ([`MAT_DIFFUSE`], [`MAT_EMITS`],
-/// [`MAT_TWO_SIDED`]) and the reflectance of the untextured Lambert ones (zero for the
-/// others). Only built when every triangle's material is in range.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct SmallMaterials {
-    pub(crate) flags: [u32; 8],
-    pub(crate) rho: [[f32; 8]; 3],
 }
 
 /// Per-instance data of [`SceneGeometry`].
@@ -108,6 +83,32 @@ pub(crate) struct TriangleRecord {
     pub(crate) material: MaterialId,
 }
 
+impl TriangleRecord {
+    /// The record of triangle `prim` of instance `instance` of `scene`.
+    fn new(scene: &Scene, instance: u32, prim: u32) -> Self {
+        let inst = &scene.instances[instance as usize];
+        let mesh = &scene.meshes[inst.mesh as usize];
+        let [p0, p1, p2] = mesh.triangle(prim as usize).map(|v| inst.transform.transform_point3(v));
+        let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+        TriangleRecord {
+            p: [p0, p1, p2],
+            n: if n.is_finite() { n } else { Vec3::ZERO },
+            scale: p0.abs().max(p1.abs()).max(p2.abs()).max_element(),
+            material: scene.material_of(instance, prim),
+        }
+    }
+}
+
+/// The inverse transpose of a transform's linear part (the identity when singular).
+fn normal_transform(t: &filtrace_core::Affine3A) -> Mat3A {
+    let inv = t.matrix3.inverse();
+    if inv.is_finite() {
+        inv.transpose()
+    } else {
+        Mat3A::IDENTITY
+    }
+}
+
 /// 32-bit words per [`TriangleRecord`]: `p` at 0..9, `n` at 9..12, `scale` at 12, the
 /// material's bits at 13.
 pub(crate) const TRI_FLOATS: usize = 14;
@@ -132,65 +133,35 @@ impl SceneGeometry {
             instances: Vec::with_capacity(scene.instances.len()),
             tris: Vec::with_capacity(scene.triangle_count()),
             constant_bsdfs,
-            small_materials: None,
-            plain_first_tris: None,
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
-            let inv = inst.transform.matrix3.inverse();
             let mesh = &scene.meshes[inst.mesh as usize];
             g.instances.push(InstanceRecord {
-                normal_xf: if inv.is_finite() { inv.transpose() } else { Mat3A::IDENTITY },
+                normal_xf: normal_transform(&inst.transform),
                 first_tri: g.tris.len() as u32,
                 has_normals: !mesh.normals.is_empty() && mesh.normals.len() == mesh.positions.len(),
                 has_uvs: !mesh.uvs.is_empty() && mesh.uvs.len() == mesh.positions.len(),
             });
-            for p in 0..mesh.triangle_count() {
-                let [p0, p1, p2] = mesh.triangle(p).map(|v| inst.transform.transform_point3(v));
-                let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-                g.tris.push(TriangleRecord {
-                    p: [p0, p1, p2],
-                    n: if n.is_finite() { n } else { Vec3::ZERO },
-                    scale: p0.abs().max(p1.abs()).max(p2.abs()).max_element(),
-                    material: scene.material_of(ii as u32, p as u32),
-                });
-            }
-        }
-        if g.instances.len() <= 8 && g.instances.iter().all(|i| !i.has_normals && !i.has_uvs) {
-            let mut first = [0u32; 8];
-            for (f, inst) in first.iter_mut().zip(&g.instances) {
-                *f = inst.first_tri;
-            }
-            g.plain_first_tris = Some(first);
-        }
-        let n = scene.materials.len();
-        if n <= 8 && g.tris.iter().all(|t| (t.material as usize) < n) {
-            let mut t = SmallMaterials::default();
-            for (i, m) in scene.materials.iter().enumerate() {
-                let rho = g.constant_diffuse(i as MaterialId);
-                let emits = m.is_emissive() && m.emission != filtrace_core::Rgb::ZERO;
-                t.flags[i] = if rho.is_some() { MAT_DIFFUSE } else { 0 }
-                    | if emits { MAT_EMITS } else { 0 }
-                    | if m.two_sided_emission { MAT_TWO_SIDED } else { 0 };
-                let r = rho.unwrap_or(filtrace_core::Rgb::ZERO);
-                (t.rho[0][i], t.rho[1][i], t.rho[2][i]) = (r.x, r.y, r.z);
-            }
-            g.small_materials = Some(Box::new(t));
+            g.tris
+                .extend((0..mesh.triangle_count() as u32).map(|p| TriangleRecord::new(scene, ii as u32, p)));
         }
         g
     }
 
-    /// For scenes of at most eight instances without vertex normals and uvs: the first
-    /// row of each instance's triangles in [`Self::tri_words`] (triangle `prim` of
-    /// instance `i` is row `first[i] + prim`, as in [`Self::plain_row`]).
-    #[inline]
-    pub(crate) fn plain_first_tris(&self) -> Option<&[u32; 8]> {
-        self.plain_first_tris.as_ref()
-    }
-
-    /// [`SmallMaterials`] of scenes with at most eight materials.
-    #[inline]
-    pub(crate) fn small_materials(&self) -> Option<&SmallMaterials> {
-        self.small_materials.as_deref()
+    /// Rewrites the records of instance `i` after its transform changed (a moved object in
+    /// a per-frame update): its triangles' world corners, normals and offset scales and
+    /// its normal transform, the values a fresh [`SceneGeometry::new`] would compute.
+    /// Costs one record per triangle of `i`; other instances are untouched. The scene's
+    /// meshes and instance list must be those it was built from.
+    pub fn update_instance(&mut self, scene: &Scene, i: u32) {
+        let inst = &scene.instances[i as usize];
+        let rec = &mut self.instances[i as usize];
+        rec.normal_xf = normal_transform(&inst.transform);
+        let first = rec.first_tri as usize;
+        let count = scene.meshes[inst.mesh as usize].triangle_count();
+        for (p, t) in self.tris[first..first + count].iter_mut().enumerate() {
+            *t = TriangleRecord::new(scene, i, p as u32);
+        }
     }
 
     #[inline]

@@ -17,6 +17,8 @@ pub enum Which {
     Adaptive(super::bench_adaptive::Args),
     /// The scene suite of issue 13: samples/s and ray throughput per scene.
     Suite(super::bench_suite::Args),
+    /// Per-frame update cost and animated-vs-still sampling speed (one object moving).
+    Animation(super::bench_animation::Args),
 }
 
 pub fn run(which: Which) -> anyhow::Result<()> {
@@ -27,5 +29,6 @@ pub fn run(which: Which) -> anyhow::Result<()> {
         Which::Pipeline(a) => super::bench_pipeline::run(a),
         Which::Adaptive(a) => super::bench_adaptive::run(a),
         Which::Suite(a) => super::bench_suite::run(a),
+        Which::Animation(a) => super::bench_animation::run(a),
     }
 }

@@ -3,6 +3,7 @@
 pub mod args;
 pub mod bench;
 pub mod bench_adaptive;
+pub mod bench_animation;
 pub mod bench_filters;
 pub mod bench_pipeline;
 pub mod bench_rays;

@@ -460,8 +460,10 @@ pub fn run_plain(c: &CommonArgs) -> anyhow::Result<()> {
     let aovs = film.try_aovs()?;
     let counts = film.sample_counts();
     let attributes = render_attributes(settings.spp, film.min_samples(), cancelled);
-    let written =
-        write_outputs(&out, &aovs, &[("samples", &["Y"], &counts)], &attributes, None, &c.tonemap())?;
+    let motion = renderer.motion_aov();
+    let extra: Vec<(&str, &[&str], &Image)> =
+        [("samples", &["Y"][..], &counts)].into_iter().chain(motion.layers()).collect();
+    let written = write_outputs(&out, &aovs, &extra, &attributes, None, &c.tonemap())?;
     let samples = film.total_samples();
     let mean = aovs.color.mean();
     let summary = Summary {

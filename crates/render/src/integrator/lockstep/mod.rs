@@ -50,15 +50,17 @@ use super::{
 use crate::bsdf::SurfaceBsdf;
 use crate::camera::PinholeCamera;
 use crate::film::VisibleSurface;
-use crate::lights::AREA_FLOATS;
 use crate::surface::{
-    gamma, SurfaceInteraction, MAT_DIFFUSE, MAT_EMITS, MAT_TWO_SIDED, OFFSET_FLOOR, OFFSET_SAFETY,
-    SHADOW_END_FRACTION, TRI_FLOATS,
+    gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, SHADOW_END_FRACTION, TRI_FLOATS,
 };
 use filtrace_accel::{Hit, HitPacket, RayPacket};
 use filtrace_core::sampling::power_heuristic;
 use filtrace_core::{Ray, Rgb, Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
+use tables::{AREA_FLOATS, MAT_DIFFUSE, MAT_EMITS, MAT_TWO_SIDED};
+
+mod tables;
+pub use tables::LockstepTables;
 
 /// Longest path (in vertices) [`LaneStats`] tells apart; longer ones count as the last.
 pub const STATS_VERTICES: usize = 16;
@@ -187,7 +189,8 @@ fn lanes_of<const A: bool>(m: M8<A>) -> impl Iterator<Item = usize> {
 /// with a usable hit (a hit on a degenerate triangle counts as a miss, as in the scalar
 /// `PathContext::intersect`).
 #[inline(always)]
-fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s: &mut Surf8<A>) -> M8<A> {
+fn from_hits<const A: bool>(lc: &LockstepContext, dir: &V8<A>, hits: &HitPacket, s: &mut Surf8<A>) -> M8<A> {
+    let ctx = &lc.ctx;
     // Per-lane loads into plain arrays, then one vector load each (setting lanes of a
     // vector value one by one goes through memory every time).
     // Rows of the plain lanes' triangle records (row 0 for the other lanes: read, unused).
@@ -200,7 +203,7 @@ fn from_hits<const A: bool>(ctx: &PathContext, dir: &V8<A>, hits: &HitPacket, s:
     // The uvs of a mesh without vertex uvs are the barycentrics (the scalar lanes'
     // records overwrite theirs below).
     s.uv = [hits.u, hits.v];
-    if let Some(first_tri) = ctx.geometry.plain_first_tris() {
+    if let Some(first_tri) = lc.tables.plain_first_tris() {
         // Every instance plain: the rows by one table lookup, the materials from the rows.
         plain = hits.mask;
         let rows = lookup8_u32(first_tri, U8::<A>::from_array(hits.instance))
@@ -366,6 +369,8 @@ pub enum RayQueries {
 /// Everything a group of eight lanes needs besides the pixels.
 pub struct LockstepContext<'a> {
     pub ctx: PathContext<'a>,
+    /// The tracer's lookup tables for the scene of `ctx`.
+    pub tables: &'a LockstepTables,
     pub params: PathParams,
     pub camera: &'a PinholeCamera,
     pub queries: RayQueries,
@@ -468,7 +473,7 @@ fn camera_group<const AVX2: bool>(
         t_max: [f32::INFINITY; LANES],
     };
     let hits = lc.intersect(&rays, lanes);
-    let hit = from_hits(ctx, &dir, &hits, si);
+    let hit = from_hits(lc, &dir, &hits, si);
     let want_surface = index == 0;
     if want_surface {
         for i in lanes_of(lanes & hit) {
@@ -509,7 +514,7 @@ fn bounce_batch<const AVX2: bool>(
     let ctx = &lc.ctx;
     let (mut p, dir, hits) = pool.load::<AVX2>(b);
     let stored = from_bits::<AVX2>(hits.mask);
-    let found = from_hits(ctx, &dir, &hits, si);
+    let found = from_hits(lc, &dir, &hits, si);
     // A hit on a degenerate triangle counts as a miss (as in `PathContext::intersect`).
     add_environment(ctx, stored & !found, &dir, &mut p, vertex);
     let act = stored & found;
@@ -601,7 +606,7 @@ fn shade<const AVX2: bool>(
 
     // The material flags and Lambert reflectances of the lanes by table lookups when
     // the scene has at most eight materials (else every lane looks its material up).
-    let small_mats = match ctx.geometry.small_materials() {
+    let small_mats = match lc.tables.small_materials() {
         Some(sm) => {
             let id = U8::from_array(si.material);
             Some((lookup8_u32(&sm.flags, id), sm, id))
@@ -724,7 +729,7 @@ fn shade<const AVX2: bool>(
     // With at most eight lights the choice and the area lights' data are lanes
     // (`SmallLights`: the alias pick and one `vpermps` per field); only the lanes that
     // chose another kind of light take the per-lane code.
-    let small = match ctx.lights.small_lights() {
+    let small = match lc.tables.small_lights() {
         Some(sl) => {
             let (k, pm) = alias_pick8(u_select, sl.n, &sl.q, &sl.alias, &sl.pmf);
             let chosen = act & pm.gt(zero);
@@ -794,7 +799,7 @@ fn shade<const AVX2: bool>(
             None => {
                 // The chosen lights' rows as lanes (words 0..8 and 8..16, transposed;
                 // the rows exist: `area_light` found the lights).
-                let words = ctx.lights.area_words();
+                let words = lc.tables.area_words();
                 let a = columns::<AVX2>(words, &a_start).expect("area light rows in the table");
                 let b =
                     columns::<AVX2>(words, &a_start.map(|s| s + 8)).expect("area light rows in the table");

@@ -1,0 +1,301 @@
+//! A per-frame world: one [`FrameDesc`] per frame (index, time, camera, resolution) and an
+//! update whose cost follows what moved (kajiya's `WorldFrameDesc` and
+//! `set_instance_transform`; STYLE.md, "Seams for a world that moves").
+//!
+//! [`Renderer::set_pose`] (or [`Renderer::prepare_frame`] for frame `n` of the scene's own
+//! animation) moves the instances, lights and camera of a [`Pose`]:
+//! - geometry stays in object space; for each instance whose transform changed, the top
+//!   level's record is recomputed and the 4-wide top level refit, or rebuilt when the refit
+//!   would let its SAH cost grow too far ([`SceneAccel::update_instances`]); the moved
+//!   instance's per-triangle shading records are rewritten
+//!   ([`SceneGeometry::update_instance`]). Instances that did not move cost nothing.
+//! - instances animated by the scene are never merged into the identity instances' bottom
+//!   level at build time, so moving them never rebuilds a bottom level;
+//! - the light set is updated only when an emitting instance or a light moved, or the
+//!   scene's bounding sphere (the power of distant lights) changed
+//!   ([`crate::lights::LightSet::update_instances`] re-derives only the moved instances'
+//!   area lights); the lockstep tables made from it follow;
+//! - a camera change touches no geometry.
+//!
+//! The image of a frame reached by updates is the image of a renderer built from scratch
+//! on the posed scene, bit for bit (`tests/frames.rs`): hits do not depend on the BVH's
+//! shape (`filtrace_accel`'s tie rule), and every record is recomputed as a fresh build
+//! computes it.
+//!
+//! Every update ([`Renderer::set_pose`], [`Renderer::prepare_frame`],
+//! [`Renderer::set_camera`]) begins a new frame: the state before it becomes the previous
+//! frame, which the [`crate::motion`] AOV reprojects into.
+
+use crate::camera::PinholeCamera;
+use crate::renderer::{RenderError, Renderer};
+use filtrace_accel::TopLevelUpdate;
+use filtrace_core::{Aabb, Affine3A};
+use filtrace_scene::animation::{ClockError, Pose};
+use filtrace_scene::{Camera, Light, Scene};
+use std::fmt;
+use std::time::Instant;
+
+/// One frame: which, when, seen from where, at what size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameDesc {
+    /// Frame number of the scene's clock (0 for a renderer never moved to a frame).
+    pub index: i64,
+    /// Seconds on the scene's clock.
+    pub time: f32,
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// What a frame update did.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FrameUpdate {
+    /// Instances whose transform changed.
+    pub moved_instances: usize,
+    /// What the acceleration structure did.
+    pub top_level: TopLevelUpdate,
+    /// Per-triangle shading records rewritten (the moved instances' triangles).
+    pub triangle_records: usize,
+    /// The light set was updated (an emitter or light moved, or the scene's bounds).
+    pub lights_updated: bool,
+    pub camera_moved: bool,
+    /// Wall time of the update.
+    pub seconds: f64,
+}
+
+/// Why a frame could not be set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameError {
+    /// The frame is outside the scene's animation.
+    Clock(ClockError),
+    /// A pose named an instance the scene does not have.
+    UnknownInstance(u32),
+    /// A pose named a light the scene does not have.
+    UnknownLight(u32),
+    /// A new resolution was rejected.
+    Resolution(RenderError),
+}
+
+impl fmt::Display for FrameError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FrameError::Clock(e) => write!(f, "{e}"),
+            FrameError::UnknownInstance(i) => write!(f, "the pose moves instance {i}, which the scene lacks"),
+            FrameError::UnknownLight(i) => write!(f, "the pose moves light {i}, which the scene lacks"),
+            FrameError::Resolution(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for FrameError {}
+
+/// The renderer's frame bookkeeping: the current frame and what the previous one needs.
+#[derive(Clone, Debug)]
+pub(crate) struct FrameState {
+    pub(crate) desc: FrameDesc,
+    /// The camera of the previous frame (the current one until something moves).
+    pub(crate) prev_camera: PinholeCamera,
+    /// Every instance's transform in the previous frame.
+    pub(crate) prev_transforms: Vec<Affine3A>,
+    /// Instances moved by the last update: their `prev_transforms` catch up at the next.
+    moved_last: Vec<u32>,
+    /// Per instance: it may have emissive triangles (moving it updates the light set).
+    emitting: Vec<bool>,
+    /// Instances moved since the light set was last updated.
+    lights_stale: Vec<u32>,
+    /// Per mesh: object-space bounds, for the scene's bounding sphere; empty when the
+    /// scene has no distant light (whose power depends on that sphere).
+    mesh_bounds: Vec<Aabb>,
+}
+
+/// The instances `scene`'s animation moves.
+pub fn animated_instances(scene: &Scene) -> Vec<u32> {
+    scene.animation.as_ref().map_or_else(Vec::new, |a| a.instances.iter().map(|&(i, _, _)| i).collect())
+}
+
+impl FrameState {
+    pub(crate) fn new(scene: &Scene, camera: Camera, pinhole: &PinholeCamera) -> Self {
+        let distant =
+            scene.lights.iter().any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)));
+        FrameState {
+            desc: FrameDesc { index: 0, time: 0.0, camera, width: pinhole.width(), height: pinhole.height() },
+            prev_camera: pinhole.clone(),
+            prev_transforms: scene.instances.iter().map(|i| i.transform).collect(),
+            moved_last: Vec::new(),
+            emitting: emitting_instances(scene),
+            lights_stale: Vec::new(),
+            mesh_bounds: if distant { scene.meshes.iter().map(|m| m.bounds()).collect() } else { Vec::new() },
+        }
+    }
+}
+
+/// Per instance: whether any material its triangles may use emits (conservative: the
+/// mesh's material list, or the override).
+fn emitting_instances(scene: &Scene) -> Vec<bool> {
+    let emits = |id: u32| scene.materials.get(id as usize).is_some_and(|m| m.is_emissive());
+    let mesh_emits: Vec<bool> =
+        scene.meshes.iter().map(|m| m.material_ids.iter().any(|&id| emits(id))).collect();
+    scene
+        .instances
+        .iter()
+        .map(|i| match i.material_override {
+            Some(id) => emits(id),
+            None => mesh_emits.get(i.mesh as usize).copied().unwrap_or(false),
+        })
+        .collect()
+}
+
+impl Renderer {
+    /// The frame currently shown.
+    pub fn frame(&self) -> &FrameDesc {
+        &self.frame.desc
+    }
+
+    /// Moves the scene to frame `index` of its animation ([`Scene::pose_at_frame`]; a
+    /// scene without animation is the same at every frame) and updates what moved.
+    pub fn prepare_frame(&mut self, index: i64) -> Result<FrameUpdate, FrameError> {
+        let pose = self.scene.pose_at_frame(index).map_err(FrameError::Clock)?;
+        let update = self.set_pose(&pose)?;
+        self.frame.desc.index = index;
+        Ok(update)
+    }
+
+    /// Applies `pose` (instances, lights, camera; a new frame, see the module docs) and
+    /// updates what moved. A pose naming unknown instances or lights is rejected whole.
+    pub fn set_pose(&mut self, pose: &Pose) -> Result<FrameUpdate, FrameError> {
+        if let Some(&(i, _)) = pose.instances.iter().find(|(i, _)| *i as usize >= self.scene.instances.len())
+        {
+            return Err(FrameError::UnknownInstance(i));
+        }
+        if let Some((i, _)) = pose.lights.iter().find(|(i, _)| *i as usize >= self.scene.lights.len()) {
+            return Err(FrameError::UnknownLight(*i));
+        }
+        let start = Instant::now();
+        self.begin_frame();
+        let moved = self.move_instances(&pose.instances);
+        let top_level = self.accel.update_instances(&self.scene, &moved);
+        let mut triangle_records = 0;
+        for &i in &moved {
+            self.geometry.update_instance(&self.scene, i);
+            triangle_records +=
+                self.scene.meshes[self.scene.instances[i as usize].mesh as usize].triangle_count();
+        }
+        let lights_moved = self.move_lights(&pose.lights);
+        let lights_updated = self.update_lights(&moved, lights_moved);
+        let camera_moved = pose.camera.as_ref().is_some_and(|c| self.move_camera(c));
+        self.frame.desc.time = pose.time;
+        self.frame.moved_last = moved;
+        Ok(FrameUpdate {
+            moved_instances: self.frame.moved_last.len(),
+            top_level,
+            triangle_records,
+            lights_updated,
+            camera_moved,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Moves the camera only (a new frame; no geometry is touched). The image is that of
+    /// a renderer built with `camera`, bit for bit.
+    pub fn set_camera(&mut self, camera: &Camera) {
+        self.begin_frame();
+        self.frame.moved_last.clear();
+        self.move_camera(camera);
+    }
+
+    /// Changes the image size (films of the old size no longer fit); the previous frame's
+    /// camera is resized with it, so motion vectors stay in pixels of the new size.
+    pub fn set_resolution(&mut self, width: u32, height: u32) -> Result<(), FrameError> {
+        let settings = crate::RenderSettings { width, height, ..self.settings.clone() };
+        settings.validate().map_err(FrameError::Resolution)?;
+        self.settings = settings;
+        (self.frame.desc.width, self.frame.desc.height) = (width, height);
+        self.camera = PinholeCamera::new(&self.frame.desc.camera, width, height);
+        self.frame.prev_camera = self.frame.prev_camera.resized(width, height);
+        Ok(())
+    }
+
+    /// The current state becomes the previous frame's.
+    fn begin_frame(&mut self) {
+        self.frame.prev_camera = self.camera.clone();
+        for &i in &self.frame.moved_last {
+            self.frame.prev_transforms[i as usize] = self.scene.instances[i as usize].transform;
+        }
+    }
+
+    /// Writes the pose's transforms; returns the instances whose transform changed.
+    fn move_instances(&mut self, transforms: &[(u32, Affine3A)]) -> Vec<u32> {
+        let mut moved = Vec::new();
+        for &(i, t) in transforms {
+            let inst = &mut self.scene.instances[i as usize];
+            if inst.transform != t {
+                inst.transform = t;
+                moved.push(i);
+            }
+        }
+        moved.sort_unstable();
+        moved.dedup();
+        moved
+    }
+
+    /// Writes the pose's lights; true when one changed.
+    fn move_lights(&mut self, lights: &[(u32, Light)]) -> bool {
+        let mut changed = false;
+        for (i, l) in lights {
+            let slot = &mut self.scene.lights[*i as usize];
+            if slot != l {
+                *slot = l.clone();
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// Points the camera at `camera`; true when it changed.
+    fn move_camera(&mut self, camera: &Camera) -> bool {
+        if *camera == self.frame.desc.camera {
+            return false;
+        }
+        self.frame.desc.camera = camera.clone();
+        self.scene.camera = Some(camera.clone());
+        self.camera = PinholeCamera::new(camera, self.settings.width, self.settings.height);
+        true
+    }
+
+    /// Brings the light set and the lockstep tables made from it up to date when an
+    /// emitter or light moved or the scene's bounding sphere changed; true when it did.
+    /// Other moves are remembered and handed to the next update (the light set keeps
+    /// per-instance bounds).
+    fn update_lights(&mut self, moved: &[u32], lights_moved: bool) -> bool {
+        self.frame.lights_stale.extend_from_slice(moved);
+        let emitter_moved = moved.iter().any(|&i| self.frame.emitting[i as usize]);
+        if !(lights_moved || emitter_moved || (!moved.is_empty() && self.radius_changed())) {
+            return false;
+        }
+        let mut stale = std::mem::take(&mut self.frame.lights_stale);
+        stale.sort_unstable();
+        stale.dedup();
+        self.lights.update_instances(&self.scene, &stale);
+        self.lockstep_tables.update_lights(&self.lights);
+        true
+    }
+
+    /// Whether the bounding sphere the light set gives distant lights their power by
+    /// differs from the posed scene's (computed as `LightSet::build` does; only for
+    /// scenes with distant lights, else false).
+    fn radius_changed(&self) -> bool {
+        let bounds = &self.frame.mesh_bounds;
+        if bounds.is_empty() {
+            return false;
+        }
+        let world = self
+            .scene
+            .instances
+            .iter()
+            .filter_map(|i| bounds.get(i.mesh as usize).map(|b| b.transformed(&i.transform)))
+            .fold(Aabb::EMPTY, Aabb::union);
+        let r = if world.is_empty() { 0.0 } else { world.bounding_radius() };
+        let r = if r.is_finite() && r > 0.0 { r } else { 1.0 };
+        r != self.lights.scene_radius()
+    }
+}

@@ -406,6 +406,11 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
     pub fn source(&self) -> &S {
         &self.source
     }
+    /// The source, to move its world to the next frame of an animation (the buffers stay).
+    /// Its resolution must stay the frame's ([`FilteredRenderer::set_settings`] checks it).
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
     pub fn filter_mut(&mut self) -> &mut F {
         &mut self.filter
     }

@@ -31,6 +31,10 @@ impl RenderSource {
     pub fn renderer(&self) -> &Renderer {
         &self.renderer
     }
+    /// The renderer, to move it to the next frame of an animation (keep its resolution).
+    pub fn renderer_mut(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
     /// The scene's bounding-box diagonal, the scale filters divide positions by.
     pub fn scene_scale(&self) -> f32 {
         let d = self.renderer.scene().bounds().extent().length();

@@ -343,7 +343,11 @@ impl Sequence<'_> {
                 done.cancelled = true;
                 break;
             }
-            let bar = multi.add(progress_bar(0, &format!("frame {}", stamp.frame)));
+            // The pipeline does not count its samples: a bar of frames only.
+            let bar = match engine {
+                Engine::Plain(..) => multi.add(progress_bar(0, &format!("frame {}", stamp.frame))),
+                Engine::Filtered(..) => indicatif::ProgressBar::hidden(),
+            };
             let rendered = engine.render(&exr, stamp, &bar)?;
             multi.remove(&bar);
             let Some(rendered) = rendered else {

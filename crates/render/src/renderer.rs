@@ -215,7 +215,8 @@ impl Renderer {
     ) -> Result<(), RenderError> {
         settings.validate()?;
         let (width, height) = (settings.width, settings.height);
-        self.settings = RenderSettings { width: self.settings.width, height: self.settings.height, ..settings };
+        self.settings =
+            RenderSettings { width: self.settings.width, height: self.settings.height, ..settings };
         if (width, height) != (self.settings.width, self.settings.height) {
             match self.set_resolution(width, height) {
                 Err(crate::frame::FrameError::Resolution(e)) => return Err(e),

@@ -143,7 +143,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     let spec_dir = a.spec.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let bar = super::render::progress_bar(1, &spec.name);
+    let bar = super::render_session::progress_bar(1, &spec.name);
     let mut backend = PipelineBackend::new(&spec_dir);
     let mut results = pool
         .install(|| {

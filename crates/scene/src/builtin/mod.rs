@@ -8,19 +8,34 @@
 //! | `grass` | 16,000 thin curved blades on a meadow, area light + sky: sub-pixel geometry | 81,924 |
 //! | `bunny-room` | the Stanford bunny in the Cornell room (needs `../shared/scenes/bunny/bunny.obj`) | ~56,000 |
 //!
+//! Animated (a [`crate::animation::SceneAnimation`]; frame 0 is the rest pose):
+//!
+//! | name | what | frames | triangles |
+//! |---|---|---|---:|
+//! | `cornell-anim` | the Cornell box, its light circling the ceiling, the camera dollying in and panning | 0..=48 at 24/s | 36 |
+//! | `classroom` | rows of desks and chairs on thin legs, two point lights moving among them, a walking camera | 0..=48 at 24/s | 38,142 |
+//! | `colonnade-flight` | a camera flight through `colonnade`, between its pillars | 0..=96 at 24/s | 696 |
+//!
 //! All built-in scenes are deterministic: the same name gives the same scene, bit for bit.
 
 mod bunny_room;
+mod classroom;
 mod colonnade;
+mod colonnade_flight;
 mod cornell;
+mod cornell_anim;
+mod furniture;
 mod grass;
 mod rng;
 
 pub use bunny_room::{bunny_room, bunny_room_from, shared_candidates};
+pub use classroom::{classroom, DESK_COLUMNS, DESK_ROWS};
 pub use colonnade::colonnade;
+pub use colonnade_flight::colonnade_flight;
 pub use cornell::{
     cornell, cornell_materials, LIGHT_RADIANCE, LIGHT_Y, MAT_BLUE, MAT_GREEN, MAT_LIGHT, MAT_RED, MAT_WHITE,
 };
+pub use cornell_anim::cornell_anim;
 pub use grass::{grass, grass_with, GrassParams};
 
 use crate::error::SceneError;
@@ -28,7 +43,7 @@ use crate::types::Scene;
 
 /// Names accepted by [`builtin`], the default first.
 pub fn builtin_names() -> &'static [&'static str] {
-    &["cornell", "colonnade", "grass", "bunny-room"]
+    &["cornell", "colonnade", "grass", "bunny-room", "cornell-anim", "classroom", "colonnade-flight"]
 }
 
 /// The built-in scene `name`, or `None` if there is none of that name or it cannot be built
@@ -44,6 +59,9 @@ pub fn try_builtin(name: &str) -> Option<Result<Scene, SceneError>> {
         "colonnade" => Some(Ok(colonnade())),
         "grass" => Some(Ok(grass())),
         "bunny-room" => Some(bunny_room()),
+        "cornell-anim" => Some(Ok(cornell_anim())),
+        "classroom" => Some(Ok(classroom())),
+        "colonnade-flight" => Some(Ok(colonnade_flight())),
         _ => None,
     }
 }

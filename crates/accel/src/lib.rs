@@ -77,7 +77,9 @@ mod avx2_packet;
 pub mod bench;
 mod blas;
 mod brute;
+mod flat_blas;
 mod packet;
+mod ray_packet;
 pub mod sah;
 pub mod testmesh;
 mod tri4;
@@ -85,7 +87,7 @@ pub mod triangle;
 mod wide;
 
 pub use brute::BruteForce;
-pub use packet::{HitPacket, RayPacket, LANES};
+pub use ray_packet::{HitPacket, RayPacket, LANES};
 pub use sah::BuildParams;
 
 use blas::Blas;
@@ -288,7 +290,7 @@ impl SceneAccel {
             .meshes
             .par_iter()
             .zip(used.par_iter())
-            .map(|(m, &u)| if u { Blas::build(m, params, simd) } else { Blas::default() })
+            .map(|(m, &u)| if u { Blas::build(m, params, simd) } else { Blas::Empty })
             .collect();
         let mut accel = Self {
             blas,
@@ -345,11 +347,11 @@ impl SceneAccel {
             .map(|(inst, &merged)| {
                 let blas = self.blas.get(inst.mesh as usize);
                 match (blas, invert_transform(&inst.transform)) {
-                    (Some(b), Some((inv, identity))) if b.tri_count > 0 && !merged => InstanceRecord {
+                    (Some(b), Some((inv, identity))) if b.tri_count() > 0 && !merged => InstanceRecord {
                         mesh: inst.mesh,
                         world_to_object: inv,
                         identity,
-                        bounds: b.bounds.transformed(&inst.transform),
+                        bounds: b.bounds().transformed(&inst.transform),
                     },
                     _ => InstanceRecord {
                         mesh: inst.mesh,
@@ -368,7 +370,7 @@ impl SceneAccel {
         let mut objects: Vec<u32> = (0..self.instances.len() as u32)
             .filter(|&i| !self.instances[i as usize].bounds.is_empty())
             .collect();
-        if self.merged.tri_count > 0 {
+        if self.merged.tri_count() > 0 {
             objects.push(MERGED);
         }
         let boxes: Vec<Aabb> = objects.iter().map(|&o| self.object_bounds(o)).collect();
@@ -384,7 +386,7 @@ impl SceneAccel {
 
     fn object_bounds(&self, object: u32) -> Aabb {
         if object == MERGED {
-            self.merged.bounds
+            self.merged.bounds()
         } else {
             self.instances[object as usize].bounds
         }
@@ -393,19 +395,13 @@ impl SceneAccel {
     /// Size and shape of the bottom levels, summed over meshes (for benchmarks and tuning).
     pub fn stats(&self) -> BvhStats {
         let mut st = BvhStats { top_level_nodes: self.tlas.len(), ..BvhStats::default() };
-        for b in &self.blas {
-            st.nodes += b.nodes.len() + b.nodes8.len();
-            st.packets += b.packets.len();
-            st.triangles += b.tri_count;
+        for b in self.blas.iter().chain([&self.merged]) {
+            st.nodes += b.node_count();
+            st.packets += b.tris().map_or(0, |t| t.packets.len());
+            st.triangles += b.tri_count();
             st.leaves += b.leaf_count();
             st.sah_cost += b.sah_cost();
         }
-        let m = &self.merged;
-        st.nodes += m.nodes.len() + m.nodes8.len();
-        st.packets += m.packets.len();
-        st.triangles += m.tri_count;
-        st.leaves += m.leaf_count();
-        st.sah_cost += m.sah_cost();
         st
     }
 
@@ -540,7 +536,7 @@ impl SceneAccel {
         }
         self.merged.validate().map_err(|e| format!("merged identity instances: {e}"))?;
         let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count()
-            + (self.merged.tri_count > 0) as usize;
+            + (self.merged.tri_count() > 0) as usize;
         if self.tlas_order.len() != live {
             return Err(format!("top level holds {} objects, {live} are hittable", self.tlas_order.len()));
         }

@@ -128,14 +128,11 @@ impl Simd {
         }
     }
 
-    /// True when this CPU runs the kernel.
+    /// True when this CPU runs the kernel ([`filtrace_core::cpu::isa`]).
     pub fn available(self) -> bool {
         match self {
             Simd::Sse => true,
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => avx2::available(),
-            #[cfg(not(target_arch = "x86_64"))]
-            Simd::Avx2 => false,
+            Simd::Avx2 => filtrace_core::cpu::isa().has_avx2(),
         }
     }
 }

@@ -295,7 +295,7 @@ impl SceneAccel {
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn avx512() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl")
+    filtrace_core::cpu::isa().has_avx512()
 }
 
 /// Lanes whose rays are valid ([`Ray::is_valid`]: finite, non-zero direction, no NaN

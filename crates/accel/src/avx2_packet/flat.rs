@@ -480,11 +480,7 @@ mod tests {
     /// single rays, so this covers the other one).
     #[test]
     fn flat_kernels_agree_across_builds() {
-        if !(is_x86_feature_detected!("avx2")
-            && is_x86_feature_detected!("fma")
-            && is_x86_feature_detected!("avx512f")
-            && is_x86_feature_detected!("avx512vl"))
-        {
+        if !filtrace_core::cpu::isa().has_avx512() {
             return;
         }
         let cornell = filtrace_scene::builtin("cornell").expect("cornell");

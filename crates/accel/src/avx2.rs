@@ -10,7 +10,7 @@
 //! bit-identical to the scalar test (no fused multiply-adds: the sheared corners and edge
 //! functions round exactly as [`crate::triangle::intersect_watertight`] does).
 //!
-//! Every function here needs AVX2 and FMA; callers check [`available`] first. The small
+//! Every function here needs AVX2 and FMA; callers check `filtrace_core::cpu::isa()` first. The small
 //! kernels are `#[inline(always)] unsafe fn`s without target features (a function with
 //! target features cannot be forced inline): they are only called from functions
 //! compiled with `avx2,fma` (`traverse8`, `SceneAccel::intersect_avx2`), into which they
@@ -24,11 +24,6 @@ use crate::wide::{cull_bound, prefetch, push_children, Entry, Leaves, Node8, FAR
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
-
-/// True when this CPU runs the AVX2 kernels (AVX2 and FMA).
-pub(crate) fn available() -> bool {
-    is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
-}
 
 /// Per-ray constants of the 8-wide box test: reciprocal direction and `origin * inv`
 /// splatted to eight lanes, and the offsets (in floats) of the near and far bound rows
@@ -576,7 +571,7 @@ impl Leaves for &mut ClosestPairs<'_> {
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
         let leaf = &self.packets[first as usize..(first + count) as usize];
         let ids = &self.prim_ids[4 * first as usize..4 * (first + count) as usize];
-        // SAFETY: the AVX2 traversal runs only where `available()` (see `Simd`).
+        // SAFETY: the AVX2 traversal runs only where `Simd::Avx2.available()`.
         if let Some((t, u, v, i)) = unsafe { closest_in(&self.ray, leaf, ids, *t_max) } {
             let k = 4 * first as usize + i;
             let best = self.best;
@@ -648,7 +643,7 @@ mod tests {
     /// directions with zero components, and rays aimed at corners.
     #[test]
     fn fused_box_test_is_conservative() {
-        if !available() {
+        if !filtrace_core::cpu::isa().has_avx2() {
             println!("SKIPPED: no AVX2 on this CPU");
             return;
         }
@@ -706,7 +701,7 @@ mod tests {
                 node.bounds[a][k % 8] = lo[a];
                 node.bounds[a + 3][k % 8] = hi[a];
             }
-            // SAFETY: checked `available()` above.
+            // SAFETY: checked `has_avx2()` above.
             let mask = unsafe { box8(&node, &RayBoxes8::new(o, d), _mm256_setzero_ps(), t_max).0 };
             assert_eq!(mask & !(1 << (k % 8)), 0, "empty slots never hit");
             if exact(o, d, lo, hi, t_max) {
@@ -722,7 +717,7 @@ mod tests {
     /// single packets.
     #[test]
     fn avx2_lanes_equal_the_scalar_test() {
-        if !available() {
+        if !filtrace_core::cpu::isa().has_avx2() {
             println!("SKIPPED: no AVX2 on this CPU");
             return;
         }
@@ -739,7 +734,7 @@ mod tests {
             let o = Vec3::new(rnd(), rnd(), rnd()) * 2.0;
             let d = Vec3::from_array(tris[k % n][0]) * 0.6 - o;
             let (t_min, t_max) = (0.1 * rnd().abs(), 1.0 + 3.0 * rnd().abs());
-            // SAFETY: checked `available()` above.
+            // SAFETY: checked `has_avx2()` above.
             let (fast, slow) = unsafe {
                 let wr = WatertightRay::new(o, d);
                 let r = Ray8::new(&wr, t_min);
@@ -757,7 +752,7 @@ mod tests {
             hits += fast.mask.count_ones();
             // The closest of the lanes, as the scalar test sees it.
             let packets = if n > 4 { vec![a, *b] } else { vec![a] };
-            // SAFETY: checked `available()` above.
+            // SAFETY: checked `has_avx2()` above.
             let ids: Vec<u32> = (0..4 * packets.len() as u32).collect();
             let closest =
                 unsafe { closest_in(&Ray8::new(&WatertightRay::new(o, d), t_min), &packets, &ids, t_max) };
@@ -781,7 +776,7 @@ mod tests {
     /// bits may come in either order.
     #[test]
     fn sorted_push_matches_a_plain_sort() {
-        if !available() {
+        if !filtrace_core::cpu::isa().has_avx2() {
             println!("SKIPPED: no AVX2 on this CPU");
             return;
         }

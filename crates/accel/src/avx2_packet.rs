@@ -3,11 +3,11 @@
 //!
 //! - **Flat bottom levels** (submodule `flat`; at most
 //!   [`crate::BuildParams::max_flat_triangles`] triangles, the Cornell box): the group
-//!   boxes (`packet::flat_layout`) are tested against the 8 rays first (8 rays x 1 box,
+//!   boxes (`flat_blas::flat_layout`) are tested against the 8 rays first (8 rays x 1 box,
 //!   branch-free, a mask of the groups some lane touches); then each triangle of the
 //!   touched groups against all active rays at once, one ray per lane (8 rays x 1
-//!   triangle per instruction). Meshes of at most [`crate::packet::MAX_FLAT_VERTS`]
-//!   distinct vertices (`packet::FlatVerts`; the Cornell box has 28 for 72 corners of its
+//!   triangle per instruction). Meshes of at most [`crate::flat_blas::MAX_FLAT_VERTS`]
+//!   distinct vertices (`flat_blas::FlatVerts`; the Cornell box has 28 for 72 corners of its
 //!   quads) shear each vertex the touched groups need once per packet
 //!   into a table on the stack (`ShearedVerts`), and the triangle loop reads its corners
 //!   from there: the per-lane permutation, origin and shear no longer compete with the
@@ -41,13 +41,12 @@
 //! `#[inline(always)]` and use no closures (closures do not inherit target features).
 
 use crate::avx2::{any_zero, hit_distance, mixed_signs};
-use crate::packet::{RayPacket, LANES};
+use crate::ray_packet::{RayPacket, LANES};
 use crate::sah::MAX_DEPTH;
-use crate::tri4::Tri4;
+use crate::tri4::{Tri4, TriPackets};
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
 use crate::wide::Node8;
 use crate::wide::{CULL_SCALE, FAR_SCALE};
-use crate::Blas;
 
 /// Packet traversal stack depth: each 8-wide level pushes at most seven entries.
 const STACK8: usize = 7 * MAX_DEPTH + 8;
@@ -590,7 +589,12 @@ unsafe fn expand<const ORDERED: bool>(
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> Option<Closest8> {
+pub(crate) unsafe fn closest_bvh(
+    nodes: &[Node8],
+    tris: &TriPackets,
+    rays: &RayPacket,
+    active: u8,
+) -> Option<Closest8> {
     // Direction signs first: the cheapest test of coherence.
     let b = Boxes8::new(rays, active as u32)?;
     if direction_spread(rays, active as u32) > MAX_SPREAD {
@@ -598,7 +602,7 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
     }
     let r = setup(rays, active as u32);
     let mut out = Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
-    if r.active == 0 || blas.nodes8.is_empty() {
+    if r.active == 0 || nodes.is_empty() {
         return Some(out);
     }
     let k = r.uniform?;
@@ -608,7 +612,7 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
     let mut cur = PacketEntry { child: 0, count: 0, lanes: r.active, t: 0.0 };
     loop {
         if cur.count == 0 {
-            let node = &blas.nodes8[cur.child as usize];
+            let node = &nodes[cur.child as usize];
             if let Some(next) =
                 expand::<true>(node, &b, r.t_min, cull8(best.t), cur.lanes, &mut stack, &mut sp)
             {
@@ -619,9 +623,9 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
             let act = lane_mask(cur.lanes);
             let t_min_act = _mm256_blendv_ps(_mm256_set1_ps(f32::NAN), r.t_min, act);
             for j in cur.child as usize..(cur.child + cur.count) as usize {
-                let tri = &blas.packets[j];
+                let tri = &tris.packets[j];
                 for l in 0..4 {
-                    let id = blas.prim_ids[4 * j + l];
+                    let id = tris.prim_ids[4 * j + l];
                     if id == u32::MAX {
                         continue;
                     }
@@ -658,13 +662,18 @@ pub(crate) unsafe fn closest_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> O
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> Option<u8> {
+pub(crate) unsafe fn occluded_bvh(
+    nodes: &[Node8],
+    tris: &TriPackets,
+    rays: &RayPacket,
+    active: u8,
+) -> Option<u8> {
     let b = Boxes8::new(rays, active as u32)?;
     if direction_spread(rays, active as u32) > MAX_SPREAD {
         return None;
     }
     let r = setup(rays, active as u32);
-    if r.active == 0 || blas.nodes8.is_empty() {
+    if r.active == 0 || nodes.is_empty() {
         return Some(0);
     }
     let k = r.uniform?;
@@ -675,7 +684,7 @@ pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> 
     let mut cur = PacketEntry { child: 0, count: 0, lanes: r.active, t: 0.0 };
     loop {
         if cur.count == 0 {
-            let node = &blas.nodes8[cur.child as usize];
+            let node = &nodes[cur.child as usize];
             if let Some(next) = expand::<false>(node, &b, r.t_min, t_cull, cur.lanes, &mut stack, &mut sp) {
                 cur = next;
                 continue;
@@ -683,9 +692,9 @@ pub(crate) unsafe fn occluded_bvh(blas: &Blas, rays: &RayPacket, active: u8) -> 
         } else {
             let mut act = lane_mask(cur.lanes);
             for j in cur.child as usize..(cur.child + cur.count) as usize {
-                let tri = &blas.packets[j];
+                let tri = &tris.packets[j];
                 for l in 0..4 {
-                    if blas.prim_ids[4 * j + l] == u32::MAX {
+                    if tris.prim_ids[4 * j + l] == u32::MAX {
                         continue;
                     }
                     let corners = [

@@ -61,7 +61,7 @@ impl SceneAccel {
     /// Refits the top level to the instances' records; [`TopLevelUpdate::Rebuilt`] when
     /// the refit tree is too much worse than a rebuilt one would be (the caller rebuilds).
     fn refit_top_level(&mut self) -> TopLevelUpdate {
-        let (order, instances, merged) = (&self.tlas_order, &self.instances, &self.merged.bounds);
+        let (order, instances, merged) = (&self.tlas_order, &self.instances, &self.merged.bounds());
         let object_bounds = |o: u32| if o == MERGED { *merged } else { instances[o as usize].bounds };
         refit(&mut self.tlas, |first, count| {
             (first..first + count).map(|k| object_bounds(order[k as usize])).fold(Aabb::EMPTY, Aabb::union)

@@ -5,6 +5,7 @@
 //! Unused lanes hold NaN corners, which never produce a hit.
 
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
+use filtrace_core::{Aabb, Vec3};
 
 /// Four triangles: `v[corner][axis][lane]`, 144 bytes.
 #[repr(C, align(16))]
@@ -37,6 +38,36 @@ impl Tri4 {
     /// True when `lane` holds a triangle (unused lanes are NaN).
     pub fn used(&self, lane: usize) -> bool {
         !self.v[0][0][lane].is_nan()
+    }
+}
+
+/// The triangles of a bottom level in leaf order, four to a packet; a leaf is a range of
+/// packets.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TriPackets {
+    pub packets: Vec<Tri4>,
+    /// Mesh triangle index of lane `l` of packet `p` at `4 p + l` (`u32::MAX`: unused).
+    pub prim_ids: Vec<u32>,
+    /// Number of triangles stored (those with finite corners).
+    pub tri_count: usize,
+    /// Object-space bounds of all triangles.
+    pub bounds: Aabb,
+}
+
+impl TriPackets {
+    /// Appends the triangles `ids` (at most four; `tri(id)` gives the corners) as one
+    /// packet.
+    pub fn push(&mut self, ids: &[u32], tri: impl Fn(u32) -> Tri) {
+        self.packets.push(Tri4::pack(&ids.iter().map(|&i| tri(i)).collect::<Vec<_>>()));
+        self.prim_ids.extend((0..4).map(|l| ids.get(l).copied().unwrap_or(u32::MAX)));
+    }
+
+    /// Box of packet `p`'s triangles.
+    pub fn packet_box(&self, p: usize) -> Aabb {
+        let pk = &self.packets[p];
+        (0..4)
+            .filter(|&l| pk.used(l))
+            .fold(Aabb::EMPTY, |b, l| b.union(Aabb::from_points(pk.lane(l).map(Vec3::from_array))))
     }
 }
 
@@ -249,7 +280,6 @@ pub(crate) fn occluded4(r4: &Ray4, p: &Tri4, t_max: f32) -> bool {
 mod tests {
     use super::*;
     use crate::testmesh::SplitMix64;
-    use filtrace_core::Vec3;
 
     /// Every lane of the SIMD test equals the scalar test bit for bit.
     #[cfg(target_arch = "x86_64")]

@@ -6,6 +6,7 @@
 //! [`shared_data`]: where every crate's tests find the data kept outside the repository.
 
 pub mod aabb;
+pub mod cpu;
 pub mod image;
 pub mod ray;
 pub mod rng;

@@ -22,8 +22,7 @@ use filtrace_core::Image;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// The B3-spline generating kernel `h` (Dammertz et al. 2010, §2.2, after [Mur97]).
-pub const B3_SPLINE: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
+pub use crate::kernel::B3_SPLINE;
 
 /// Parameters of [`atrous`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -13,6 +13,10 @@ use crate::gbuffer::{Guides, Planes3};
 use crate::simd::{exp_neg_g, isa, madd, Isa};
 use rayon::prelude::*;
 
+/// The B3-spline generating kernel `h` (Dammertz et al. 2010, §2.2, after [Mur97]); here
+/// beside the weighted sum so that the filter passes using it depend on this module only.
+pub const B3_SPLINE: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
+
 /// One kernel entry: offset in pixels and kernel weight `h`.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Tap {

@@ -94,16 +94,9 @@ pub fn scaled_exp_neg<const F: bool>(x: f32, log2_h: f32) -> f32 {
 /// `log2` of the smallest non-zero value of [`scaled_exp_neg`].
 pub const SCALED_EXP_MIN_LOG2: f32 = -100.0;
 
-/// The instruction set the hot loops run with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Isa {
-    /// 16 lanes (AVX-512F with AVX2 and FMA).
-    Avx512,
-    /// 8 lanes (AVX2 and FMA).
-    Avx2,
-    /// The baseline build (SSE2 on x86-64).
-    Base,
-}
+/// The instruction set the hot loops run with (detected once per process by
+/// [`filtrace_core::cpu`]).
+pub use filtrace_core::cpu::Isa;
 
 /// The instruction set the hot loops run with: the widest this CPU runs, narrowed on the
 /// calling thread by [`with_isa`]. Every filter reads it once, on the calling thread,
@@ -117,37 +110,10 @@ pub fn isa() -> Isa {
     }
 }
 
-/// The widest instruction set of the hot loops this CPU runs.
+/// The widest instruction set of the hot loops this CPU runs ([`filtrace_core::cpu::isa`]).
 #[inline]
 pub fn cpu_isa() -> Isa {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx512f") && has_avx2() {
-            return Isa::Avx512;
-        }
-    }
-    if has_avx2() {
-        Isa::Avx2
-    } else {
-        Isa::Base
-    }
-}
-
-impl Isa {
-    /// f32 lanes of one vector.
-    pub fn lanes(self) -> usize {
-        match self {
-            Self::Avx512 => 16,
-            Self::Avx2 => 8,
-            Self::Base => 4,
-        }
-    }
-
-    /// Every build this CPU runs, widest first (tests run each against the naive filters).
-    pub fn supported() -> Vec<Isa> {
-        let cpu = cpu_isa();
-        [Isa::Avx512, Isa::Avx2, Isa::Base].into_iter().filter(|i| i.lanes() <= cpu.lanes()).collect()
-    }
+    filtrace_core::cpu::isa()
 }
 
 thread_local! {
@@ -171,14 +137,7 @@ pub fn with_isa<R>(cap: Isa, f: impl FnOnce() -> R) -> R {
 /// True when the AVX2 build of the hot loops may run on this CPU.
 #[inline]
 pub fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    cpu_isa().has_avx2()
 }
 
 #[cfg(test)]
@@ -205,7 +164,7 @@ mod tests {
     #[test]
     fn scaled_exp_neg_matches_std_exp() {
         // Every B3 kernel product h = b_x b_y (1/256 .. 9/64), and 1.
-        let b3 = crate::atrous::B3_SPLINE;
+        let b3 = crate::kernel::B3_SPLINE;
         for h in b3.iter().flat_map(|a| b3.iter().map(move |b| a * b)).chain([1.0]) {
             let l = h.log2();
             for fma in [false, true] {

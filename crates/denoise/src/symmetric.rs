@@ -67,7 +67,7 @@ struct Level {
 
 impl Level {
     fn new(width: usize, stride: usize, step: usize, inv: [f32; 3]) -> Self {
-        let b3 = crate::atrous::B3_SPLINE;
+        let b3 = crate::kernel::B3_SPLINE;
         let s = step as isize;
         let half = HALF.map(|(kx, ky)| {
             let (dx, dy) = (kx * s, (ky * s) as usize);

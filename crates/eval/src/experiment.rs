@@ -385,8 +385,8 @@ pub fn run_experiment(
         let crop = scene.crop.unwrap_or_else(|| default_crop(spec.width, spec.height));
         let ref_name = format!("{sname}-reference.png");
         let ref_crop = format!("{sname}-reference-crop.png");
-        crate::report::write_png(&out.join(&ref_name), &reference)?;
-        crate::report::write_png(&out.join(&ref_crop), &crate::report::zoomed_crop(&reference, crop))?;
+        crate::figures::write_png(&out.join(&ref_name), &reference)?;
+        crate::figures::write_png(&out.join(&ref_crop), &crate::figures::zoomed_crop(&reference, crop))?;
         results.scenes.push(SceneResult {
             name: scene.name.clone(),
             reference: ref_name,
@@ -409,13 +409,13 @@ pub fn run_experiment(
                 let base = format!("{sname}-{}-{spp}spp", method.name);
                 let (image, error_map, crop_name) =
                     (format!("{base}.png"), format!("{base}-error.png"), format!("{base}-crop.png"));
-                crate::report::write_png(&out.join(&image), &run.image)?;
-                crate::report::write_png(
+                crate::figures::write_png(&out.join(&image), &run.image)?;
+                crate::figures::write_png(
                     &out.join(&crop_name),
-                    &crate::report::zoomed_crop(&run.image, crop),
+                    &crate::figures::zoomed_crop(&run.image, crop),
                 )?;
                 let map = crate::metrics::rel_mse_map(&run.image, &reference).map_err(|e| e.to_string())?;
-                crate::report::write_error_map(&out.join(&error_map), &map)?;
+                crate::figures::write_error_map(&out.join(&error_map), &map)?;
                 results.entries.push(Entry {
                     scene: scene.name.clone(),
                     method: method.name.clone(),
@@ -440,10 +440,13 @@ pub fn run_experiment(
                     let base = format!("{sname}-{name}-{spp}spp");
                     let (image, error_map, crop_name) =
                         (format!("{base}.png"), format!("{base}-error.png"), format!("{base}-crop.png"));
-                    crate::report::write_png(&out.join(&image), &img)?;
-                    crate::report::write_png(&out.join(&crop_name), &crate::report::zoomed_crop(&img, crop))?;
+                    crate::figures::write_png(&out.join(&image), &img)?;
+                    crate::figures::write_png(
+                        &out.join(&crop_name),
+                        &crate::figures::zoomed_crop(&img, crop),
+                    )?;
                     let map = crate::metrics::rel_mse_map(&img, &reference).map_err(|e| e.to_string())?;
-                    crate::report::write_error_map(&out.join(&error_map), &map)?;
+                    crate::figures::write_error_map(&out.join(&error_map), &map)?;
                     results.entries.push(Entry {
                         scene: scene.name.clone(),
                         method: name,

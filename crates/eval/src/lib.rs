@@ -8,6 +8,7 @@ pub mod metrics;
 
 // Experiments and their reports (pipeline/evaluation engineer).
 pub mod experiment;
+pub mod figures;
 pub mod oidn;
 pub mod pfm;
 pub mod report;

@@ -14,7 +14,7 @@
 
 use filtrace_core::{Image, Rgb, Vec3};
 
-use crate::memory::{self, AllocError};
+use crate::fallible::{self, AllocError};
 
 /// The surface seen through the pixel centre. A miss is the all-zero record: albedo 0,
 /// normal the zero vector (= "no surface"; filters test for it), position 0, depth 0.
@@ -145,7 +145,7 @@ impl Film {
     /// error, not an abort (see [`crate::memory`]).
     pub fn try_new(width: usize, height: usize) -> Result<Self, AllocError> {
         let what = format!("the {width}x{height} film");
-        let pixels = memory::try_vec(width * height, FilmPixel::default(), &what)?;
+        let pixels = fallible::try_vec(width * height, FilmPixel::default(), &what)?;
         Ok(Self { width, height, pixels })
     }
 
@@ -216,7 +216,7 @@ impl Film {
     pub fn try_aovs(&self) -> Result<Aovs, AllocError> {
         let (w, h) = (self.width, self.height);
         let image = |c: usize| -> Result<Image, AllocError> {
-            let data = memory::try_vec(w * h * c, 0.0f32, &format!("the {w}x{h} AOV images"))?;
+            let data = fallible::try_vec(w * h * c, 0.0f32, &format!("the {w}x{h} AOV images"))?;
             Ok(Image::from_vec(w, h, c, data).expect("size matches"))
         };
         let mut a = Aovs {

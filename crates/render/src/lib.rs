@@ -12,6 +12,7 @@
 
 pub mod bsdf;
 pub mod camera;
+mod fallible;
 pub mod film;
 pub mod frame;
 pub mod frame_bench;

@@ -14,6 +14,7 @@
 
 use std::fmt;
 
+pub use crate::fallible::{bytes_of, try_resize, try_vec, AllocError, Bytes};
 use crate::film::FilmPixel;
 
 /// Name of the environment variable that overrides the available memory (bytes).
@@ -66,29 +67,6 @@ impl fmt::Display for MemoryEstimate {
             self.parts.iter().filter(|(_, b)| *b > 0).map(|(n, b)| format!("{n} {}", Bytes(*b))).collect();
         write!(f, "{})", parts.join(", "))
     }
-}
-
-/// A byte count printed in GiB, MiB or KiB.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Bytes(pub u64);
-
-impl fmt::Display for Bytes {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let b = self.0 as f64;
-        let (gib, mib) = ((1u64 << 30) as f64, (1u64 << 20) as f64);
-        if b >= gib {
-            write!(f, "{:.1} GiB", b / gib)
-        } else if b >= mib {
-            write!(f, "{:.1} MiB", b / mib)
-        } else {
-            write!(f, "{:.1} KiB", b / 1024.0)
-        }
-    }
-}
-
-/// Bytes of `n` values of `T`.
-pub fn bytes_of<T>(n: u64) -> u64 {
-    n.saturating_mul(std::mem::size_of::<T>() as u64)
 }
 
 /// Bytes of a `w x h` image of `channels` f32 channels.
@@ -232,38 +210,6 @@ pub fn check_against(needs: &MemoryEstimate, available: Option<&Available>) -> R
 pub fn check(needs: &MemoryEstimate) -> Result<(), String> {
     let a = available()?;
     check_against(needs, a.as_ref()).map_err(|e| e.to_string())
-}
-
-/// A big buffer that could not be allocated.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct AllocError {
-    pub what: String,
-    pub bytes: u64,
-}
-
-impl fmt::Display for AllocError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "out of memory: cannot allocate {} for {}", Bytes(self.bytes), self.what)
-    }
-}
-
-impl std::error::Error for AllocError {}
-
-/// `n` copies of `value`, allocated fallibly (`what` names the buffer in the error).
-pub fn try_vec<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>, AllocError> {
-    let mut v = Vec::new();
-    try_resize(&mut v, n, value, what)?;
-    Ok(v)
-}
-
-/// `v.resize(n, value)`, with the growth allocated fallibly.
-pub fn try_resize<T: Clone>(v: &mut Vec<T>, n: usize, value: T, what: &str) -> Result<(), AllocError> {
-    if n > v.len() {
-        v.try_reserve_exact(n - v.len())
-            .map_err(|_| AllocError { what: what.to_string(), bytes: bytes_of::<T>(n as u64) })?;
-    }
-    v.resize(n, value);
-    Ok(())
 }
 
 #[cfg(test)]

@@ -407,7 +407,7 @@ impl Renderer {
     /// [`Renderer::render_tile`] in lockstep, with the best lane code the CPU runs.
     fn render_tile_lockstep(&self, tile: &TileJob, pixels: &mut [FilmPixel], stats: &mut LaneStats) -> bool {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if filtrace_core::cpu::isa().has_avx2() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.render_tile_lockstep_avx2(tile, pixels, stats) };
         }

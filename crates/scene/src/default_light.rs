@@ -4,7 +4,7 @@
 //!   light makes the background visible (then a warning).
 //! - No light (no light source of non-zero power and no emissive material that any
 //!   instance uses): a bare mesh file (OBJ, PLY, glTF) is lit by [`default_lights`], as mesh
-//!   viewers do, with a warning saying so; with [`LoadOptions::default_light`] off, and for
+//!   viewers do, with a warning saying so; with [`crate::LoadOptions::default_light`] off, and for
 //!   TOML scenes (written on purpose), a warning that the image will be black.
 
 use std::path::Path;
@@ -12,7 +12,6 @@ use std::path::Path;
 use filtrace_core::{Rgb, Vec3};
 
 use crate::error::SceneError;
-use crate::load::LoadOptions;
 use crate::types::{Environment, Light, Scene};
 
 /// The light a bare mesh file gets: a neutral sky (zenith 1, horizon 0.8, ground 0.3) and
@@ -64,12 +63,13 @@ pub fn has_light(scene: &Scene) -> bool {
     false
 }
 
-/// Applies the rules of the module docs to `scene`, loaded from `path`.
+/// Applies the rules of the module docs to `scene`, loaded from `path`; `default_light`:
+/// [`crate::LoadOptions::default_light`].
 pub(crate) fn check_light_and_geometry(
     scene: &mut Scene,
     path: &Path,
     bare_mesh: bool,
-    options: &LoadOptions,
+    default_light: bool,
 ) -> Result<(), SceneError> {
     let has_env = scene.lights.iter().any(|l| matches!(l, Light::Environment(_)));
     if scene.triangle_count() == 0 {
@@ -86,7 +86,7 @@ pub(crate) fn check_light_and_geometry(
     if has_light(scene) {
         return Ok(());
     }
-    if bare_mesh && options.default_light {
+    if bare_mesh && default_light {
         scene.lights.extend(default_lights());
         scene.stats.warnings.push(format!(
             "{}: no lights in the file: lit by the default sky and sun (render --no-default-light turns this off)",

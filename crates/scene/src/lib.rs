@@ -22,6 +22,7 @@ mod gltf_accessor;
 pub mod gltf_anim;
 pub mod gltf_load;
 pub mod load;
+mod mesh_file;
 pub mod obj;
 pub mod ply;
 pub mod shapes;

@@ -36,35 +36,23 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let mut scene = load_part(path)?;
     let bare_mesh = !extension(path).eq("toml");
-    crate::default_light::check_light_and_geometry(&mut scene, path, bare_mesh, options)?;
+    crate::default_light::check_light_and_geometry(&mut scene, path, bare_mesh, options.default_light)?;
     for w in &mut scene.stats.warnings {
         *w = crate::error::escape_control(w);
     }
     Ok(scene)
 }
 
-fn extension(path: &Path) -> String {
-    path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default()
-}
+use crate::mesh_file::extension;
 
 /// Loads, sanitizes and de-duplicates one file, without the scene-level checks of
-/// [`load_with`]: also used for the mesh files a TOML scene places.
-pub(crate) fn load_part(path: &Path) -> Result<Scene, SceneError> {
-    let ext = extension(path);
-    let mut scene = match ext.as_str() {
-        "obj" => crate::obj::load_obj(path),
-        "ply" => crate::ply::load_ply(path),
-        "gltf" | "glb" => crate::gltf_load::load_gltf(path),
-        "toml" => crate::toml_scene::load_toml(path),
-        _ => Err(SceneError::Unsupported {
-            what: format!(
-                "{}: unknown scene file extension '{ext}' (expected obj, gltf, glb, ply or toml)",
-                path.display()
-            ),
-        }),
-    }?;
-    crate::validate::sanitize(&mut scene, path)?;
-    crate::dedup::remove_duplicate_triangles(&mut scene, path);
+/// [`load_with`].
+fn load_part(path: &Path) -> Result<Scene, SceneError> {
+    if extension(path) != "toml" {
+        return crate::mesh_file::load_mesh_file(path);
+    }
+    let mut scene = crate::toml_scene::load_toml(path)?;
+    crate::mesh_file::sanitize_part(&mut scene, path)?;
     Ok(scene)
 }
 

@@ -530,7 +530,7 @@ impl Builder<'_> {
             return Err(self.err(span.clone(), "a mesh file cannot be another TOML scene"));
         }
         if !self.files.contains_key(&p) {
-            let sub = crate::load::load_part(&p)
+            let sub = crate::mesh_file::load_mesh_file(&p)
                 .map_err(|e| self.err(span.clone(), format!("cannot load mesh '{file}': {e}")))?;
             let loaded = self.merge(sub);
             self.files.insert(p.clone(), loaded);

@@ -10,11 +10,9 @@ use super::{
     NO_HIT,
 };
 use crate::avx2::{any_zero, hit_distance, mixed_signs};
-use crate::packet::{
-    FlatGroup, FlatNode, FlatTri, RayPacket, VertRow, LANES, MAX_FLAT_VERTS, SHEARED_VERT_BYTES,
-};
+use crate::flat_blas::{FlatBlas, FlatGroup, FlatNode, FlatTri, VertRow, MAX_FLAT_VERTS, SHEARED_VERT_BYTES};
+use crate::ray_packet::{RayPacket, LANES};
 use crate::wide::FAR_SCALE;
-use crate::Blas;
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
@@ -157,7 +155,7 @@ pub(crate) unsafe fn flat_node_touch(n: &FlatNode, o: Vec3, d: Vec3, t_min: f32,
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+pub(crate) unsafe fn closest_flat(blas: &FlatBlas, rays: &RayPacket, active: u8) -> Closest8 {
     closest_flat_in(blas, rays, active)
 }
 
@@ -167,19 +165,19 @@ pub(crate) unsafe fn closest_flat(blas: &Blas, rays: &RayPacket, active: u8) -> 
 /// # Safety
 /// The CPU has AVX2, FMA, AVX-512F and AVX-512VL.
 #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-pub(crate) unsafe fn closest_flat_avx512(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+pub(crate) unsafe fn closest_flat_avx512(blas: &FlatBlas, rays: &RayPacket, active: u8) -> Closest8 {
     closest_flat_in(blas, rays, active)
 }
 
 #[inline(always)]
-unsafe fn closest_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8 {
+unsafe fn closest_flat_in(blas: &FlatBlas, rays: &RayPacket, active: u8) -> Closest8 {
     let r = setup(rays, active as u32);
     let lb = LaneBoxes::new(rays);
-    let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
+    let groups = touched_groups(&blas.packet_groups, &lb, r.t_min, cull8(r.t_max), r.act);
     if r.active == 0 || groups == 0 {
         return Closest8 { id: I8([NO_HIT; LANES]), ..Closest8::default() };
     }
-    if !blas.flat_verts.is_empty() {
+    if !blas.packet_verts.is_empty() {
         return match r.uniform {
             Some(k) => closest_flat_table::<true>(blas, &r, k, groups),
             None => closest_flat_table::<false>(blas, &r, [0, 1, 2], groups),
@@ -193,7 +191,7 @@ unsafe fn closest_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> Closest8
 
 /// The groups of the flat `blas` set in `groups` (bit `g` = group `g`), in index order.
 #[inline(always)]
-fn touched<'a>(blas: &'a Blas, groups: u32) -> impl Iterator<Item = &'a FlatGroup> + 'a {
+fn touched<'a>(blas: &'a FlatBlas, groups: u32) -> impl Iterator<Item = &'a FlatGroup> + 'a {
     let mut left = groups;
     std::iter::from_fn(move || {
         if left == 0 {
@@ -201,14 +199,14 @@ fn touched<'a>(blas: &'a Blas, groups: u32) -> impl Iterator<Item = &'a FlatGrou
         }
         let g = left.trailing_zeros() as usize;
         left &= left - 1;
-        Some(&blas.flat_groups[g])
+        Some(&blas.packet_groups[g])
     })
 }
 
 /// The triangles of group `g` of the flat `blas`.
 #[inline(always)]
-fn group_tris<'a>(blas: &'a Blas, g: &FlatGroup) -> &'a [FlatTri] {
-    &blas.flat_tris[g.first as usize..(g.first + g.count) as usize]
+fn group_tris<'a>(blas: &'a FlatBlas, g: &FlatGroup) -> &'a [FlatTri] {
+    &blas.packet_tris[g.first as usize..(g.first + g.count) as usize]
 }
 
 /// The sheared vertices of a flat mesh's vertex table that a packet needs, indexed as the
@@ -218,15 +216,15 @@ struct ShearedVerts([MaybeUninit<[__m256; 3]>; MAX_FLAT_VERTS]);
 const _: () = assert!(std::mem::size_of::<[__m256; 3]>() == SHEARED_VERT_BYTES);
 
 impl ShearedVerts {
-    /// Shears the vertices of `blas.flat_verts` set in the groups' masks of `groups`.
+    /// Shears the vertices of `blas.packet_verts` set in the groups' masks of `groups`.
     #[inline(always)]
-    unsafe fn new<const UNIFORM: bool>(blas: &Blas, r: &Regs<'_>, k: [usize; 3], groups: u32) -> Self {
+    unsafe fn new<const UNIFORM: bool>(blas: &FlatBlas, r: &Regs<'_>, k: [usize; 3], groups: u32) -> Self {
         let mut needed = touched(blas, groups).fold(0u64, |m, g| m | g.verts);
         let mut table = ShearedVerts([MaybeUninit::uninit(); MAX_FLAT_VERTS]);
         while needed != 0 {
             let j = needed.trailing_zeros() as usize;
             needed &= needed - 1;
-            table.0[j] = MaybeUninit::new(shear(corner_row::<UNIFORM>(&blas.flat_verts[j], r, k), r));
+            table.0[j] = MaybeUninit::new(shear(corner_row::<UNIFORM>(&blas.packet_verts[j], r, k), r));
         }
         table
     }
@@ -244,7 +242,7 @@ impl ShearedVerts {
 /// ([`ShearedVerts`]), then the triangles of the touched groups read from the table.
 #[inline(always)]
 unsafe fn closest_flat_table<const UNIFORM: bool>(
-    blas: &Blas,
+    blas: &FlatBlas,
     r: &Regs<'_>,
     k: [usize; 3],
     groups: u32,
@@ -265,7 +263,7 @@ unsafe fn closest_flat_table<const UNIFORM: bool>(
 
 #[inline(always)]
 unsafe fn closest_flat_k<const UNIFORM: bool>(
-    blas: &Blas,
+    blas: &FlatBlas,
     r: &Regs<'_>,
     k: [usize; 3],
     groups: u32,
@@ -334,7 +332,7 @@ unsafe fn closest_sheared<const UNIFORM: bool>(
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+pub(crate) unsafe fn occluded_flat(blas: &FlatBlas, rays: &RayPacket, active: u8) -> u8 {
     occluded_flat_in(blas, rays, active)
 }
 
@@ -343,19 +341,19 @@ pub(crate) unsafe fn occluded_flat(blas: &Blas, rays: &RayPacket, active: u8) ->
 /// # Safety
 /// The CPU has AVX2, FMA, AVX-512F and AVX-512VL.
 #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
-pub(crate) unsafe fn occluded_flat_avx512(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+pub(crate) unsafe fn occluded_flat_avx512(blas: &FlatBlas, rays: &RayPacket, active: u8) -> u8 {
     occluded_flat_in(blas, rays, active)
 }
 
 #[inline(always)]
-unsafe fn occluded_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
+unsafe fn occluded_flat_in(blas: &FlatBlas, rays: &RayPacket, active: u8) -> u8 {
     let r = setup(rays, active as u32);
     let lb = LaneBoxes::new(rays);
-    let groups = touched_groups(&blas.flat_groups, &lb, r.t_min, cull8(r.t_max), r.act);
+    let groups = touched_groups(&blas.packet_groups, &lb, r.t_min, cull8(r.t_max), r.act);
     if r.active == 0 || groups == 0 {
         return 0;
     }
-    if !blas.flat_verts.is_empty() {
+    if !blas.packet_verts.is_empty() {
         return (match r.uniform {
             Some(k) => occluded_flat_table::<true>(blas, &r, k, groups),
             None => occluded_flat_table::<false>(blas, &r, [0, 1, 2], groups),
@@ -370,7 +368,7 @@ unsafe fn occluded_flat_in(blas: &Blas, rays: &RayPacket, active: u8) -> u8 {
 /// [`occluded_flat`] on a mesh with a vertex table (as [`closest_flat_table`]).
 #[inline(always)]
 unsafe fn occluded_flat_table<const UNIFORM: bool>(
-    blas: &Blas,
+    blas: &FlatBlas,
     r: &Regs<'_>,
     k: [usize; 3],
     groups: u32,
@@ -409,7 +407,12 @@ unsafe fn any_hits(r: &Regs<'_>, tri: &FlatTri, a: &[__m256; 3], b: &[__m256; 3]
 }
 
 #[inline(always)]
-unsafe fn occluded_flat_k<const UNIFORM: bool>(blas: &Blas, r: Regs<'_>, k: [usize; 3], groups: u32) -> u32 {
+unsafe fn occluded_flat_k<const UNIFORM: bool>(
+    blas: &FlatBlas,
+    r: Regs<'_>,
+    k: [usize; 3],
+    groups: u32,
+) -> u32 {
     // Branch-free per triangle (a lane's hit is found at an unpredictable triangle: a
     // branch on it mispredicted about once per lane); lanes that hit leave `act`, and
     // the packet stops once per group when all have.
@@ -477,11 +480,7 @@ mod tests {
     /// single rays, so this covers the other one).
     #[test]
     fn flat_kernels_agree_across_builds() {
-        if !(is_x86_feature_detected!("avx2")
-            && is_x86_feature_detected!("fma")
-            && is_x86_feature_detected!("avx512f")
-            && is_x86_feature_detected!("avx512vl"))
-        {
+        if !filtrace_core::cpu::isa().has_avx512() {
             return;
         }
         let cornell = filtrace_scene::builtin("cornell").expect("cornell");
@@ -496,8 +495,10 @@ mod tests {
 
     fn flat_kernels_agree(scene: &filtrace_scene::Scene, params: &crate::BuildParams, table: bool) {
         let accel = SceneAccel::build_with(scene, params);
-        let blas = accel.object_blas(accel.single.expect("one object"));
-        assert!(blas.flat && blas.flat_verts.is_empty() != table);
+        let crate::blas::Blas::Flat(blas) = accel.object_blas(accel.single.expect("one object")) else {
+            panic!("a flat bottom level expected");
+        };
+        assert!(blas.packet_verts.is_empty() != table);
         let (bounce, shadow) = surface_rays(scene, &accel, 4096, 3);
         let mut rays = incoherent_rays(scene, 4096, 5);
         rays.extend(shadow_rays(scene, 4096, 5));

@@ -66,7 +66,7 @@ macro_rules! avx_or {
         #[cfg(target_arch = "x86_64")]
         if $a {
             // SAFETY: `A = true` is only instantiated in the AVX2 tile loop, which runs
-            // after `is_x86_feature_detected!("avx2")` and `("fma")`.
+            // after `filtrace_core::cpu::isa().has_avx2()` (AVX2 and FMA).
             #[allow(unused_unsafe)]
             return unsafe { $avx };
         }
@@ -924,7 +924,7 @@ mod tests {
         let v: [f32; LANES] = std::array::from_fn(|i| i as f32 + 0.5);
         let w: [u32; LANES] = std::array::from_fn(|i| 100 + i as u32);
         #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        let avx2 = filtrace_core::cpu::isa().has_avx2();
         #[cfg(not(target_arch = "x86_64"))]
         let avx2 = false;
         for keep in 0..=255u8 {
@@ -975,7 +975,7 @@ mod tests {
         assert!(columns::<false>(&table, &[193; LANES]).is_none());
         assert!(columns::<false>(&table, &[usize::MAX; LANES]).is_none());
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if filtrace_core::cpu::isa().has_avx2() {
             let v = columns::<true>(&table, &start).unwrap();
             for j in 0..8 {
                 assert_eq!(v[j].to_array(), portable[j].to_array());
@@ -999,7 +999,7 @@ mod tests {
                     std::array::from_fn(|i| ((step * 8 + i as u32) as f32 * 0.618_034).fract());
                 let (k, pm) = alias_pick8::<false>(F8::from_array(u), n as u32, &q, &alias, &pmf);
                 #[cfg(target_arch = "x86_64")]
-                if std::arch::is_x86_feature_detected!("avx2") {
+                if filtrace_core::cpu::isa().has_avx2() {
                     let (k2, pm2) = alias_pick8::<true>(F8::from_array(u), n as u32, &q, &alias, &pmf);
                     assert_eq!((k2.to_array(), pm2.to_array()), (k.to_array(), pm.to_array()));
                 }

@@ -115,7 +115,7 @@ mod tests {
         for index in [0u32, 1, 2, 5, 255, 1 << 20, u32::MAX] {
             let s8 = Sampler8::<false>::new(keys, index);
             #[cfg(target_arch = "x86_64")]
-            let avx2 = std::arch::is_x86_feature_detected!("avx2");
+            let avx2 = filtrace_core::cpu::isa().has_avx2();
             #[cfg(not(target_arch = "x86_64"))]
             let avx2 = false;
             for slot in [0u32, 1, 4, 33] {

@@ -182,3 +182,30 @@ fn small_lights(lights: &LightSet, area_words: &[f32]) -> Option<SmallLights> {
     }
     Some(t)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use filtrace_core::{Affine3A, Vec3};
+
+    /// After moving an instance, `LightSet::update_instances` + `update_lights` give the
+    /// tables a build from the moved scene gives (the Cornell box: at most eight lights, so
+    /// `SmallLights` too; its light moved).
+    #[test]
+    fn updated_light_tables_equal_rebuilt_ones() {
+        let mut scene = filtrace_scene::builtin("cornell").unwrap();
+        let geometry = SceneGeometry::new(&scene);
+        let mut lights = LightSet::build(&scene);
+        let mut tables = LockstepTables::new(&scene, &geometry, &lights);
+        assert!(tables.small_lights().is_some() && tables.small_materials().is_some());
+        let light = (0..scene.instances.len() as u32)
+            .find(|&i| lights.area_light_index(i, 0).is_some() || lights.area_light_index(i, 1).is_some())
+            .expect("the Cornell box has an emissive instance");
+        scene.instances[light as usize].transform = Affine3A::from_translation(Vec3::new(30.0, -20.0, 10.0))
+            * scene.instances[light as usize].transform;
+        lights.update_instances(&scene, &[light]);
+        tables.update_lights(&lights);
+        let rebuilt = LockstepTables::new(&scene, &SceneGeometry::new(&scene), &LightSet::build(&scene));
+        assert_eq!(format!("{tables:?}"), format!("{rebuilt:?}"));
+    }
+}

@@ -393,8 +393,13 @@ where
         .map(|&t| std::array::from_fn(|i| if i < dim { x[i] + t * dx[i] } else { 0.0 }))
         .collect();
     let f0 = g0 + barrier(&x, &eps, rho);
-    let values = objectives(&trials, dim, ts, samples);
+    // The full step usually passes near the optimum: try it and its half first, and
+    // replay the samples for the shorter steps only when both fail.
+    let mut values = objectives(&trials[..2], dim, ts, samples.clone());
     for (s, &t) in steps.iter().enumerate() {
+        if s == values.len() {
+            values.extend(objectives(&trials[s..], dim, ts, samples.clone()));
+        }
         let f = values[s] + barrier(&trials[s], &eps, rho);
         if f.is_finite() && f <= f0 - ARMIJO * t * decrement {
             let mut out = *params;

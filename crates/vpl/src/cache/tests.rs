@@ -199,3 +199,53 @@ fn build_and_optimize_do_not_depend_on_thread_count() {
     };
     assert_eq!(run(1), run(3));
 }
+
+/// Stage timings at the frame size (512 × 512 shading points, 2048 VPLs, 2048
+/// records) on the toy scene, printed; the toy's VPL evaluation stands in for the
+/// renderer's (no BVH), so only search, sampling and optimisation are representative.
+#[test]
+#[ignore = "slow: timing at frame size, prints milliseconds per stage"]
+fn stage_timings_at_frame_size() {
+    use rayon::prelude::*;
+    use std::time::Instant;
+    let scene = ToyScene::new(2048, 1);
+    let config = CacheParams::default();
+    let t = Instant::now();
+    let mut cache = toy_cache(&scene, 2048, &config);
+    let build = t.elapsed();
+    let points = surface_points(512 * 512, 2);
+    let t = Instant::now();
+    let neighbours: Vec<Neighbours> =
+        points.par_iter().map(|x| cache.neighbours(x.position, x.normal)).collect();
+    let search = t.elapsed();
+    for kind in SamplerKind::ALL {
+        let t = Instant::now();
+        let feedback: Vec<Option<SampleFeedback>> = points
+            .par_iter()
+            .zip(&neighbours)
+            .enumerate()
+            .map(|(i, (x, nb))| {
+                let mut rng = SplitMix64::new(i as u64);
+                let plan = cache.sample(kind, nb, &mut || rng.next_f32());
+                let d = plan.draws().first()?;
+                plan.feedback(0, scene.unoccluded_at(d.vpl as usize, x.position, x.normal))
+            })
+            .collect();
+        let sampling = t.elapsed();
+        let feedback: Vec<SampleFeedback> = feedback.into_iter().flatten().collect();
+        let t = Instant::now();
+        let stats = cache.optimize(&feedback);
+        eprintln!(
+            "{:>10}: sample {:7.1} ms, optimise {:7.1} ms ({} records stepped)",
+            kind.name(),
+            sampling.as_secs_f64() * 1e3,
+            t.elapsed().as_secs_f64() * 1e3,
+            stats.stepped
+        );
+    }
+    eprintln!(
+        "build (toy evaluation) {:.1} ms, search {:.1} ms",
+        build.as_secs_f64() * 1e3,
+        search.as_secs_f64() * 1e3
+    );
+}

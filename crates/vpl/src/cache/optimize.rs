@@ -1,0 +1,493 @@
+//! Per-record optimal mixture and control-variate weights (He and Owen 2014, "Optimal
+//! mixture weights in multiple importance sampling"; thesis 3.5 and 5.2.2).
+//!
+//! Record `i` owns mixture weights `α'` (the optimiser's variables; sampling uses
+//! `α = α' / Σ α'`) and control-variate weights `β` (dimensionless: `β_k = 1` means "the
+//! record's distribution k, scaled by its total, predicts f"). For the record's problem we
+//! let its parameters act on the interpolated distributions of each sample's pixel:
+//! `s(j) = Σ_k α'_k P_k(j)` and residual `r(j) = f(j) − Σ_k β_k Q_k(j)` (luminance), and
+//! minimise He and Owen's objective
+//!
+//! `G(α', β) = E_q0[ r(j)² / (s(j) q0(j)) ] = Σ_j r(j)² / s(j)`,
+//!
+//! the second moment of the one-sample estimator with all J distributions as control
+//! variates; it is jointly convex, and its minimum over β equals the minimal variance
+//! (He and Owen, section 3), so minimising it minimises the variance. The frame's own
+//! samples `j ~ q0` (the mixture actually used) estimate G, its gradient and Hessian, each
+//! sample weighted by the record's interpolation weight `w_i` and normalised by `Σ w_i`
+//! (thesis 5.2.2). Constraints `α'_k > ε_k`, `Σ α'_k < 1` enter as the log barrier
+//!
+//! `f'(α', β) = G − ρ Σ_k log(α'_k − ε_k) − ρ log(1 − Σ_k α'_k)`, `ρ = barrier · G`,
+//!
+//! (ρ relative to G keeps the barrier's pull independent of the scene's brightness). One
+//! damped Newton step per record per frame: the Newton direction, then backtracking (t =
+//! 1, 1/2, ..., 1/16) on the same samples' estimate of f' until the Armijo condition
+//! holds (Boyd and Vandenberghe 9.5); no step if none does.
+
+// Index loops over the small matrices read as the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
+use super::search::Neighbours;
+use super::{CacheParams, DistributionSet, ImportanceCache, MAX_NEIGHBOURS, TECHNIQUES};
+use filtrace_core::{luminance, Rgb};
+use rayon::prelude::*;
+
+/// Variables of one record: α' and β of up to 4 techniques.
+const MAX_VARS: usize = 2 * TECHNIQUES;
+/// Step sizes tried by the backtracking line search.
+const STEPS: [f64; 5] = [1.0, 0.5, 0.25, 0.125, 0.0625];
+/// Armijo sufficient-decrease constant.
+const ARMIJO: f64 = 0.25;
+
+/// Parameters of the per-record optimisation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OptimizerParams {
+    /// Lower bounds ε_k of the mixture weights (full, unoccluded, bounded, uniform): no
+    /// distribution is ever dismissed, the uniform one least of all (the defensive
+    /// fallback that bounds the variance, thesis 3.5).
+    pub min_alpha: [f32; TECHNIQUES],
+    /// Barrier strength ρ relative to the objective G. The optimum sits about
+    /// `barrier` from `Σ α' = 1` (relatively) and a comparable distance above each ε_k.
+    pub barrier: f32,
+    /// A record whose samples' weights sum to less keeps its parameters this frame:
+    /// a Newton step from a handful of samples is noise.
+    pub min_weight: f32,
+}
+
+impl Default for OptimizerParams {
+    fn default() -> Self {
+        OptimizerParams { min_alpha: [0.02, 0.02, 0.02, 0.05], barrier: 1e-3, min_weight: 4.0 }
+    }
+}
+
+impl OptimizerParams {
+    /// Checks the parameters for the enabled distributions.
+    pub fn validate(&self, set: &DistributionSet) -> Result<(), String> {
+        let sum: f32 = set.techniques().map(|t| self.min_alpha[t as usize]).sum();
+        if self.min_alpha.iter().any(|&e| !(e.is_finite() && e >= 0.0)) || sum >= 0.9 {
+            return Err(format!(
+                "optimizer mixture lower bounds {:?} (expected >= 0, summing below 0.9)",
+                self.min_alpha
+            ));
+        }
+        if !(self.barrier.is_finite() && self.barrier > 0.0) {
+            return Err(format!("optimizer barrier {} (expected > 0)", self.barrier));
+        }
+        if !(self.min_weight.is_finite() && self.min_weight >= 0.0) {
+            return Err(format!("optimizer minimum sample weight {} (expected >= 0)", self.min_weight));
+        }
+        Ok(())
+    }
+}
+
+/// The `optimized` sampler's parameters of one record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordParams {
+    /// α', the unnormalised mixture weights (`Σ < 1`, `α'_k > ε_k`; 0 for disabled
+    /// distributions).
+    pub alpha: [f32; TECHNIQUES],
+    /// β, the control-variate weights (0 for disabled distributions).
+    pub beta: [f32; TECHNIQUES],
+}
+
+/// A priori β: the full distribution at its own total, the interpolated full
+/// contribution as the first guess of the pixel (thesis 5.2.1); 0 without it.
+pub(crate) fn prior_beta(set: &DistributionSet) -> [f32; TECHNIQUES] {
+    [if set.full { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0]
+}
+
+impl RecordParams {
+    /// The a priori start: `α' = ε + 0.95 (1 − Σ ε) · prior mixture`, β from
+    /// `prior_beta`: the `balance-cv` sampler's choice up to the ε shift.
+    pub fn prior(config: &CacheParams) -> Self {
+        let eps = config.optimizer.min_alpha;
+        let set = config.distributions;
+        let free = 1.0 - set.techniques().map(|t| eps[t as usize]).sum::<f32>();
+        let mix = config.prior_mixture();
+        let mut alpha = [0.0; TECHNIQUES];
+        for t in set.techniques() {
+            alpha[t as usize] = eps[t as usize] + 0.95 * free * mix[t as usize];
+        }
+        RecordParams { alpha, beta: prior_beta(&set) }
+    }
+
+    /// The normalised mixture `α' / Σ α'` the sampler uses.
+    pub fn mixture(&self) -> [f32; TECHNIQUES] {
+        let sum: f32 = self.alpha.iter().sum();
+        self.alpha.map(|a| a / sum)
+    }
+
+    /// `Σ w_l θ_l` for weights summing to 1: stays feasible (the constraints are convex).
+    pub fn blend<'a>(items: impl Iterator<Item = (&'a RecordParams, f32)>) -> Self {
+        let mut out = RecordParams { alpha: [0.0; TECHNIQUES], beta: [0.0; TECHNIQUES] };
+        for (p, w) in items {
+            for k in 0..TECHNIQUES {
+                out.alpha[k] += w * p.alpha[k];
+                out.beta[k] += w * p.beta[k];
+            }
+        }
+        out
+    }
+}
+
+/// What one evaluated draw of the `optimized` sampler teaches the records it used.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleFeedback {
+    ids: [u32; MAX_NEIGHBOURS],
+    weights: [f32; MAX_NEIGHBOURS],
+    len: u8,
+    /// `P_k(j)`.
+    pub pmf: [f32; TECHNIQUES],
+    /// `Q_k(j)`.
+    pub cv: [f32; TECHNIQUES],
+    /// `1 / q0(j)`, the sample's importance weight (1 for an exhaustive sum).
+    pub inv_pdf: f32,
+    /// Luminance of the full contribution f(j).
+    pub value: f32,
+}
+
+impl SampleFeedback {
+    /// Feedback for the records of `nb`.
+    pub fn new(
+        nb: &Neighbours,
+        pmf: [f32; TECHNIQUES],
+        cv: [f32; TECHNIQUES],
+        inv_pdf: f32,
+        contribution: Rgb,
+    ) -> Self {
+        let mut fb =
+            SampleFeedback { pmf, cv, inv_pdf, value: luminance(contribution), ..Default::default() };
+        for (s, (l, w)) in nb.iter().enumerate() {
+            fb.ids[s] = l as u32;
+            fb.weights[s] = w;
+        }
+        fb.len = nb.len() as u8;
+        fb
+    }
+
+    /// Feedback for explicit `(record, weight)` pairs (synthetic problems, tests).
+    pub fn for_records(
+        records: &[(usize, f32)],
+        pmf: [f32; TECHNIQUES],
+        cv: [f32; TECHNIQUES],
+        inv_pdf: f32,
+        value: f32,
+    ) -> Self {
+        let mut fb = SampleFeedback { pmf, cv, inv_pdf, value, ..Default::default() };
+        for (s, &(l, w)) in records.iter().take(MAX_NEIGHBOURS).enumerate() {
+            fb.ids[s] = l as u32;
+            fb.weights[s] = w;
+        }
+        fb.len = records.len().min(MAX_NEIGHBOURS) as u8;
+        fb
+    }
+
+    /// `(record, weight)` pairs.
+    pub fn records(&self) -> impl Iterator<Item = (usize, f32)> + '_ {
+        (0..self.len as usize).map(|s| (self.ids[s] as usize, self.weights[s]))
+    }
+}
+
+/// Summary of one [`ImportanceCache::optimize`] call.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OptimizeStats {
+    /// Records that took a step.
+    pub stepped: usize,
+    /// Records left unchanged (too few samples, no decrease, degenerate objective).
+    pub kept: usize,
+    /// Σ over stepped records of the estimated G before and after the step.
+    pub objective_before: f64,
+    pub objective_after: f64,
+}
+
+/// Result of one record's step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOutcome {
+    pub params: RecordParams,
+    /// Whether a step was taken.
+    pub stepped: bool,
+    /// Estimated G at the old and new parameters (equal when no step).
+    pub objective_before: f64,
+    pub objective_after: f64,
+}
+
+impl ImportanceCache {
+    /// One damped Newton step per record from this frame's feedback (see the module
+    /// docs). `feedback` must come in a fixed order (e.g. pixel order, draws in order):
+    /// the records then see their samples in that order, and the result does not
+    /// depend on the thread count.
+    pub fn optimize(&mut self, feedback: &[SampleFeedback]) -> OptimizeStats {
+        let n = self.records.len();
+        // Per-record lists of (feedback index, weight), in feedback order (CSR).
+        let mut start = vec![0usize; n + 1];
+        for fb in feedback {
+            for (l, _) in fb.records().filter(|&(l, w)| l < n && w > 0.0) {
+                start[l + 1] += 1;
+            }
+        }
+        for l in 0..n {
+            start[l + 1] += start[l];
+        }
+        let mut fill = start.clone();
+        let mut entries = vec![(0u32, 0.0f32); start[n]];
+        for (i, fb) in feedback.iter().enumerate() {
+            for (l, w) in fb.records().filter(|&(l, w)| l < n && w > 0.0) {
+                entries[fill[l]] = (i as u32, w);
+                fill[l] += 1;
+            }
+        }
+        let set = self.config.distributions;
+        let opt = &self.config.optimizer;
+        let outcomes: Vec<StepOutcome> = (0..n)
+            .into_par_iter()
+            .map(|l| {
+                let samples =
+                    entries[start[l]..start[l + 1]].iter().map(|&(i, w)| (&feedback[i as usize], w));
+                newton_step(&self.params[l], &set, opt, samples)
+            })
+            .collect();
+        let mut stats = OptimizeStats::default();
+        for (l, o) in outcomes.into_iter().enumerate() {
+            self.params[l] = o.params;
+            if o.stepped {
+                stats.stepped += 1;
+                stats.objective_before += o.objective_before;
+                stats.objective_after += o.objective_after;
+            } else {
+                stats.kept += 1;
+            }
+        }
+        stats
+    }
+}
+
+/// The enabled techniques as indices, and their count J (2J variables: α' then β).
+fn enabled(set: &DistributionSet) -> ([usize; TECHNIQUES], usize) {
+    let mut ts = [0usize; TECHNIQUES];
+    let mut j = 0;
+    for t in set.techniques() {
+        ts[j] = t as usize;
+        j += 1;
+    }
+    (ts, j)
+}
+
+/// G's sample estimate with its gradient and Hessian over the 2J variables.
+struct Moments {
+    weight: f64,
+    objective: f64,
+    gradient: [f64; MAX_VARS],
+    hessian: [[f64; MAX_VARS]; MAX_VARS],
+}
+
+/// Accumulates G, ∇G, ∇²G at `x` (α' then β of the enabled techniques) over the
+/// weighted samples, normalised by the weight sum:
+/// `∂G/∂α_k = −r² P_k / s²`, `∂G/∂β_k = −2 r Q_k / s`, `∂²G/∂α_k∂α_m = 2 r² P_k P_m / s³`,
+/// `∂²G/∂β_k∂β_m = 2 Q_k Q_m / s`, `∂²G/∂α_k∂β_m = 2 r P_k Q_m / s²`, each times `1/q0`.
+fn moments<'a>(x: &[f64], ts: &[usize], samples: impl Iterator<Item = (&'a SampleFeedback, f32)>) -> Moments {
+    let j = ts.len();
+    let mut m = Moments {
+        weight: 0.0,
+        objective: 0.0,
+        gradient: [0.0; MAX_VARS],
+        hessian: [[0.0; MAX_VARS]; MAX_VARS],
+    };
+    for (fb, w) in samples {
+        let p: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.pmf[ts[k]] as f64 } else { 0.0 });
+        let q: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.cv[ts[k]] as f64 } else { 0.0 });
+        let s: f64 = (0..j).map(|k| x[k] * p[k]).sum();
+        let r = fb.value as f64 - (0..j).map(|k| x[j + k] * q[k]).sum::<f64>();
+        let a = w as f64 * fb.inv_pdf as f64;
+        m.weight += w as f64;
+        if !(s > 0.0 && a.is_finite() && r.is_finite()) {
+            continue;
+        }
+        m.objective += a * r * r / s;
+        for k in 0..j {
+            m.gradient[k] -= a * r * r * p[k] / (s * s);
+            m.gradient[j + k] -= 2.0 * a * r * q[k] / s;
+            for n in 0..j {
+                m.hessian[k][n] += 2.0 * a * r * r * p[k] * p[n] / (s * s * s);
+                m.hessian[j + k][j + n] += 2.0 * a * q[k] * q[n] / s;
+                let cross = 2.0 * a * r * p[k] * q[n] / (s * s);
+                m.hessian[k][j + n] += cross;
+                m.hessian[j + n][k] += cross;
+            }
+        }
+    }
+    if m.weight > 0.0 {
+        let inv = 1.0 / m.weight;
+        m.objective *= inv;
+        m.gradient.iter_mut().for_each(|g| *g *= inv);
+        m.hessian.iter_mut().flatten().for_each(|h| *h *= inv);
+    }
+    m
+}
+
+/// The barrier `−ρ Σ log(α'_k − ε_k) − ρ log(1 − Σ α'_k)`; +∞ outside the domain.
+fn barrier(x: &[f64], eps: &[f64], rho: f64) -> f64 {
+    let mut b = 0.0;
+    let mut sum = 0.0;
+    for (k, &e) in eps.iter().enumerate() {
+        let slack = x[k] - e;
+        if !(slack > 0.0) {
+            return f64::INFINITY;
+        }
+        b -= rho * slack.ln();
+        sum += x[k];
+    }
+    if !(sum < 1.0) {
+        return f64::INFINITY;
+    }
+    b - rho * (1.0 - sum).ln()
+}
+
+/// One damped Newton step of record parameters `params` on the weighted samples (see
+/// the module docs). The samples are read twice (moments, then the line search).
+pub fn newton_step<'a, I>(
+    params: &RecordParams,
+    set: &DistributionSet,
+    opt: &OptimizerParams,
+    samples: I,
+) -> StepOutcome
+where
+    I: Iterator<Item = (&'a SampleFeedback, f32)> + Clone,
+{
+    let keep =
+        |g: f64| StepOutcome { params: *params, stepped: false, objective_before: g, objective_after: g };
+    let (ts, j) = enabled(set);
+    let ts = &ts[..j];
+    let dim = 2 * j;
+    let mut x = [0.0f64; MAX_VARS];
+    for (k, &t) in ts.iter().enumerate() {
+        x[k] = params.alpha[t] as f64;
+        x[j + k] = params.beta[t] as f64;
+    }
+    let eps: Vec<f64> = ts.iter().map(|&t| opt.min_alpha[t] as f64).collect();
+    let m = moments(&x[..dim], ts, samples.clone());
+    let g0 = m.objective;
+    if m.weight < opt.min_weight as f64
+        || !(g0 > 0.0 && g0.is_finite())
+        || !barrier(&x, &eps, 1.0).is_finite()
+    {
+        return keep(g0);
+    }
+    let rho = opt.barrier as f64 * g0;
+    let (mut grad, mut hess) = (m.gradient, m.hessian);
+    add_barrier_derivatives(&x[..j], &eps, rho, &mut grad, &mut hess);
+    let Some(dx) = solve_newton(&hess, &grad, dim) else { return keep(g0) };
+    let decrement: f64 = -(0..dim).map(|i| grad[i] * dx[i]).sum::<f64>();
+    if !(decrement > 0.0) {
+        return keep(g0);
+    }
+    // Backtracking on the sampled f' at the trial points, all in one pass.
+    let trials: Vec<[f64; MAX_VARS]> = STEPS
+        .iter()
+        .map(|&t| std::array::from_fn(|i| if i < dim { x[i] + t * dx[i] } else { 0.0 }))
+        .collect();
+    let f0 = g0 + barrier(&x, &eps, rho);
+    let values = objectives(&trials, dim, ts, samples);
+    for (s, &t) in STEPS.iter().enumerate() {
+        let f = values[s] + barrier(&trials[s], &eps, rho);
+        if f.is_finite() && f <= f0 - ARMIJO * t * decrement {
+            let mut out = *params;
+            for (k, &tk) in ts.iter().enumerate() {
+                out.alpha[tk] = trials[s][k] as f32;
+                out.beta[tk] = trials[s][j + k] as f32;
+            }
+            // Rounding to f32 must not leave the domain.
+            let back: Vec<f64> = (0..j).map(|k| out.alpha[ts[k]] as f64).collect();
+            if !barrier(&back, &eps, 1.0).is_finite() {
+                return keep(g0);
+            }
+            return StepOutcome {
+                params: out,
+                stepped: true,
+                objective_before: g0,
+                objective_after: values[s],
+            };
+        }
+    }
+    keep(g0)
+}
+
+/// Adds the barrier's gradient and Hessian (α' block only).
+fn add_barrier_derivatives(
+    alpha: &[f64],
+    eps: &[f64],
+    rho: f64,
+    grad: &mut [f64; MAX_VARS],
+    hess: &mut [[f64; MAX_VARS]; MAX_VARS],
+) {
+    let slack_sum = 1.0 - alpha.iter().sum::<f64>();
+    for k in 0..alpha.len() {
+        let slack = alpha[k] - eps[k];
+        grad[k] += -rho / slack + rho / slack_sum;
+        hess[k][k] += rho / (slack * slack);
+        for n in 0..alpha.len() {
+            hess[k][n] += rho / (slack_sum * slack_sum);
+        }
+    }
+}
+
+/// Sampled G at each trial point (same normalisation as [`moments`]).
+fn objectives<'a>(
+    trials: &[[f64; MAX_VARS]],
+    dim: usize,
+    ts: &[usize],
+    samples: impl Iterator<Item = (&'a SampleFeedback, f32)>,
+) -> Vec<f64> {
+    let j = dim / 2;
+    let (mut sums, mut weight) = (vec![0.0f64; trials.len()], 0.0f64);
+    for (fb, w) in samples {
+        weight += w as f64;
+        let a = w as f64 * fb.inv_pdf as f64;
+        for (x, sum) in trials.iter().zip(sums.iter_mut()) {
+            let s: f64 = (0..j).map(|k| x[k] * fb.pmf[ts[k]] as f64).sum();
+            let r = fb.value as f64 - (0..j).map(|k| x[j + k] * fb.cv[ts[k]] as f64).sum::<f64>();
+            if s > 0.0 && a.is_finite() {
+                *sum += a * r * r / s;
+            } else {
+                *sum = f64::INFINITY;
+            }
+        }
+    }
+    sums.iter().map(|s| if weight > 0.0 { s / weight } else { *s }).collect()
+}
+
+/// Solves `H dx = −g` for the symmetric positive semi-definite `H` by Cholesky, with a
+/// tiny relative ridge (directions no sample constrains get no step). `None` if `H` is
+/// not positive definite even so.
+fn solve_newton(h: &[[f64; MAX_VARS]; MAX_VARS], g: &[f64; MAX_VARS], dim: usize) -> Option<[f64; MAX_VARS]> {
+    let scale = (0..dim).map(|i| h[i][i].abs()).fold(0.0, f64::max);
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    let mut l = [[0.0f64; MAX_VARS]; MAX_VARS];
+    for i in 0..dim {
+        for k in 0..=i {
+            let mut s = h[i][k] + if i == k { 1e-9 * scale } else { 0.0 };
+            for m in 0..k {
+                s -= l[i][m] * l[k][m];
+            }
+            if i == k {
+                if !(s > 0.0) {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][k] = s / l[k][k];
+            }
+        }
+    }
+    // Forward then back substitution.
+    let mut y = [0.0f64; MAX_VARS];
+    for i in 0..dim {
+        y[i] = (-g[i] - (0..i).map(|m| l[i][m] * y[m]).sum::<f64>()) / l[i][i];
+    }
+    let mut dx = [0.0f64; MAX_VARS];
+    for i in (0..dim).rev() {
+        dx[i] = (y[i] - (i + 1..dim).map(|m| l[m][i] * dx[m]).sum::<f64>()) / l[i][i];
+    }
+    dx.iter().all(|v| v.is_finite()).then_some(dx)
+}

@@ -1,0 +1,242 @@
+//! Cache records and the cache itself: per record the four distributions over the VPLs
+//! (thesis 4.2.5) with their cumulative sums, built per record in parallel.
+
+use super::optimize::RecordParams;
+use super::search::{KdTree, Neighbours};
+use super::{CacheParams, CachePoint, RecordValues, Technique, VplSet, TECHNIQUES};
+use filtrace_core::sampling::Distribution1D;
+use filtrace_core::{luminance, Rgb, Vec3};
+use rayon::prelude::*;
+
+/// Neighbourhood radius of a record with no other record, as a fraction of the scene
+/// diagonal.
+const LONE_RECORD_RADIUS: f32 = 0.05;
+
+/// One importance record: its point, neighbourhood and distributions.
+#[derive(Clone, Debug)]
+pub struct CacheRecord {
+    pub point: CachePoint,
+    /// Radius of the ball the bounded distribution E³ covers: the distance to the
+    /// farthest of the record's M nearest other records (its region of influence).
+    pub radius: f32,
+    /// Largest angle between the record's normal and those M neighbours' normals (the
+    /// receiver's normal slack of E³).
+    pub normal_cone: f32,
+    /// E¹, E², E³ (luminance) with their CDFs; E⁴ (uniform) needs no table.
+    distributions: [Distribution1D; 3],
+    /// RGB sums over the VPLs of E¹, E², E³; the uniform slot repeats E²'s (its control
+    /// variate's scale: E⁴ = 1 carries no radiance of its own).
+    totals: [Rgb; TECHNIQUES],
+}
+
+impl CacheRecord {
+    /// A record from its evaluated values.
+    pub fn new(point: CachePoint, radius: f32, normal_cone: f32, values: &RecordValues) -> Self {
+        let t = values.totals;
+        CacheRecord {
+            point,
+            radius,
+            normal_cone,
+            distributions: [
+                Distribution1D::new(&values.full),
+                Distribution1D::new(&values.unoccluded),
+                Distribution1D::new(&values.bounded),
+            ],
+            totals: [t[0], t[1], t[2], t[1]],
+        }
+    }
+
+    /// Number of VPLs the record covers.
+    #[inline]
+    pub fn vpl_count(&self) -> usize {
+        self.distributions[0].count()
+    }
+
+    /// `p_t(j)`: probability that distribution `t` draws VPL `j` (the CDF's step, so it
+    /// is exactly what [`CacheRecord::sample`] does; uniform when a table is all zero).
+    #[inline]
+    pub fn pmf(&self, t: Technique, j: usize) -> f32 {
+        match t {
+            Technique::Uniform => {
+                let n = self.vpl_count();
+                if j < n {
+                    1.0 / n as f32
+                } else {
+                    0.0
+                }
+            }
+            _ => self.distributions[t as usize].pmf(j),
+        }
+    }
+
+    /// Draws a VPL from distribution `t` with `u` in `[0, 1)` (binary search of the CDF).
+    #[inline]
+    pub fn sample(&self, t: Technique, u: f32) -> usize {
+        match t {
+            Technique::Uniform => {
+                let n = self.vpl_count();
+                ((u * n as f32) as usize).min(n.saturating_sub(1))
+            }
+            _ => self.distributions[t as usize].sample_discrete(u).0,
+        }
+    }
+
+    /// The table of distribution `t` (`None` for uniform).
+    pub fn distribution(&self, t: Technique) -> Option<&Distribution1D> {
+        (t != Technique::Uniform).then(|| &self.distributions[t as usize])
+    }
+
+    /// `T_t`: RGB total of distribution `t` over the VPLs (the control variate's
+    /// integral at β = 1).
+    #[inline]
+    pub fn total(&self, t: Technique) -> Rgb {
+        self.totals[t as usize]
+    }
+
+    /// `L_t = luminance(T_t)`.
+    #[inline]
+    pub fn luminance_total(&self, t: Technique) -> f32 {
+        luminance(self.totals[t as usize])
+    }
+}
+
+/// The importance cache of one frame: records, their search tree, the `optimized`
+/// sampler's per-record parameters, and the configuration they were built with.
+#[derive(Clone, Debug)]
+pub struct ImportanceCache {
+    pub(crate) records: Vec<CacheRecord>,
+    pub(crate) params: Vec<RecordParams>,
+    tree: KdTree,
+    pub(crate) config: CacheParams,
+    vpl_count: usize,
+}
+
+impl ImportanceCache {
+    /// A cache without records: every sampler falls back to `uniform`.
+    pub fn empty(vpl_count: usize, config: &CacheParams) -> Self {
+        ImportanceCache {
+            records: Vec::new(),
+            params: Vec::new(),
+            tree: KdTree::default(),
+            config: config.clone(),
+            vpl_count,
+        }
+    }
+
+    /// Evaluates every VPL at every point (per record in parallel; the result does not
+    /// depend on the thread count) and builds the distributions. `scene_diagonal` is D
+    /// of λ = `lambda_scale` · D. `previous`: the last frame's cache, whose optimised
+    /// parameters are interpolated at the new records (M nearest, same weights as
+    /// shading); without it the parameters start a priori.
+    pub fn build(
+        vpls: &impl VplSet,
+        points: Vec<CachePoint>,
+        scene_diagonal: f32,
+        config: &CacheParams,
+        previous: Option<&ImportanceCache>,
+    ) -> Result<Self, String> {
+        config.validate()?;
+        if !(scene_diagonal.is_finite() && scene_diagonal > 0.0) {
+            return Err(format!(
+                "importance cache: scene diagonal {scene_diagonal} (expected finite and > 0)"
+            ));
+        }
+        let lambda = config.lambda_scale * scene_diagonal;
+        let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+        let normals: Vec<Vec3> = points.iter().map(|p| p.normal).collect();
+        let tree = KdTree::new(&positions, &normals, lambda);
+        let vpl_count = vpls.vpl_count();
+        let records: Vec<CacheRecord> = points
+            .par_iter()
+            .enumerate()
+            .map_init(RecordValues::default, |values, (i, &point)| {
+                let (radius, cone) = neighbourhood(&tree, &points, i, config.neighbours, scene_diagonal);
+                vpls.evaluate_record(&point, radius, values);
+                CacheRecord::new(point, radius, cone, values)
+            })
+            .collect();
+        let mut cache =
+            ImportanceCache { records, params: Vec::new(), tree, config: config.clone(), vpl_count };
+        cache.params = cache.initial_params(previous);
+        Ok(cache)
+    }
+
+    /// A priori parameters, or those of `previous` interpolated at each record.
+    fn initial_params(&self, previous: Option<&ImportanceCache>) -> Vec<RecordParams> {
+        let prior = RecordParams::prior(&self.config);
+        self.records
+            .iter()
+            .map(|r| match previous {
+                Some(prev) if !prev.records.is_empty() => {
+                    let nb = prev.neighbours(r.point.position, r.point.normal);
+                    RecordParams::blend(nb.iter().map(|(l, w)| (&prev.params[l], w)))
+                }
+                _ => prior,
+            })
+            .collect()
+    }
+
+    /// The records.
+    pub fn records(&self) -> &[CacheRecord] {
+        &self.records
+    }
+
+    /// The `optimized` sampler's parameters, one per record.
+    pub fn params(&self) -> &[RecordParams] {
+        &self.params
+    }
+
+    /// Replaces the parameters (e.g. to carry them over unchanged records).
+    pub fn set_params(&mut self, params: Vec<RecordParams>) -> Result<(), String> {
+        if params.len() != self.records.len() {
+            return Err(format!(
+                "importance cache: {} parameter sets for {} records",
+                params.len(),
+                self.records.len()
+            ));
+        }
+        self.params = params;
+        Ok(())
+    }
+
+    /// The configuration the cache was built with.
+    pub fn config(&self) -> &CacheParams {
+        &self.config
+    }
+
+    /// Number of VPLs.
+    pub fn vpl_count(&self) -> usize {
+        self.vpl_count
+    }
+
+    /// λ of the search distance.
+    pub fn lambda(&self) -> f32 {
+        self.tree.lambda()
+    }
+
+    /// The M nearest records of a shading point, with their interpolation weights
+    /// (empty when the cache has no records).
+    pub fn neighbours(&self, position: Vec3, normal: Vec3) -> Neighbours {
+        let m = self.config.neighbours;
+        Neighbours::from_nearest(self.tree.nearest(position, normal, m + 1).as_slice(), m)
+    }
+}
+
+/// Radius and normal cone of record `i`: over its M nearest other records, the largest
+/// distance and the largest normal angle.
+fn neighbourhood(tree: &KdTree, points: &[CachePoint], i: usize, m: usize, diagonal: f32) -> (f32, f32) {
+    let p = points[i];
+    let nearest = tree.nearest(p.position, p.normal, m + 1);
+    let (mut radius, mut cone, mut found) = (0.0f32, 0.0f32, false);
+    for &(_, id) in nearest.as_slice().iter().filter(|&&(_, id)| id as usize != i).take(m) {
+        let q = points[id as usize];
+        radius = radius.max((q.position - p.position).length());
+        cone = cone.max(p.normal.dot(q.normal).clamp(-1.0, 1.0).acos());
+        found = true;
+    }
+    if found {
+        (radius, cone)
+    } else {
+        (LONE_RECORD_RADIUS * diagonal, 0.0)
+    }
+}

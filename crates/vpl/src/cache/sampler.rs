@@ -1,0 +1,223 @@
+//! The VPL samplers: given a shading point's neighbouring records, which VPLs to
+//! evaluate and how to combine them. Every sampler returns a [`SamplePlan`] and the
+//! integrator forms `L ≈ offset + Σ_i weight_i · f(vpl_i)` with `f` the VPL's full
+//! contribution (BSDF, geometry term and visibility; a draw of weight 0 needs no ray).
+//!
+//! Notation (thesis 5.2.2): records `l` with weights `w_l` (Σ = 1), techniques `k` with
+//! per-record pmfs `p_lk(j)`, mixture weights `α_lk` (Σ_k = 1), control-variate weights
+//! `β_lk` and RGB totals `T_lk`.
+//! - one-sample balance heuristic: `(l, k) ~ w_l α_lk`, `j ~ p_lk`,
+//!   `q(j) = Σ_l w_l Σ_k α_lk p_lk(j)`, estimate `f(j) / q(j)`;
+//! - with control variates `h(j) = Σ_l w_l Σ_k β_lk p_lk(j) T_lk` whose sum over the VPLs
+//!   is `C = Σ_l w_l Σ_k β_lk T_lk`: estimate `(f(j) − h(j)) / q(j) + C` (He and Owen
+//!   2014; the control variate subtracted before importance sampling, thesis eq. 6).
+//!   Unbiased for any fixed α, β since `Σ_j p_lk(j) = 1`;
+//! - α-max: per enabled technique `k` one draw `j_k ~ P_k = Σ_l w_l p_lk` (the records'
+//!   distributions combined by the balance heuristic with the record weights, as
+//!   Georgiev interpolates), weight `w_k^α-max(j_k) / P_k(j_k)`.
+
+use super::alpha_max::alpha_max_owner;
+use super::optimize::SampleFeedback;
+use super::search::Neighbours;
+use super::{ImportanceCache, SamplerKind, Technique, MAX_NEIGHBOURS, TECHNIQUES};
+use filtrace_core::Rgb;
+
+/// Most draws in one plan (α-max: one per distribution).
+pub const MAX_DRAWS: usize = TECHNIQUES;
+
+/// One VPL to evaluate and its weight in the estimate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VplDraw {
+    pub vpl: u32,
+    /// Multiplies the VPL's contribution `f(vpl)`.
+    pub weight: f32,
+    /// Mixture pmf `q(j)` (one-sample samplers; 0 for α-max).
+    pub pdf: f32,
+    /// `P_k(j) = Σ_l w_l p_lk(j)` per technique (0 for disabled ones).
+    pub interpolated_pmf: [f32; TECHNIQUES],
+    /// `Q_k(j) = Σ_l w_l L_lk p_lk(j)`, the luminance control variates at β = 1.
+    pub interpolated_cv: [f32; TECHNIQUES],
+}
+
+/// What a sampler asks the integrator to do at one shading point (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SamplePlan {
+    /// Added to the weighted contributions: `C − h(j)/q(j)` for the control-variate
+    /// samplers, 0 otherwise.
+    pub offset: Rgb,
+    draws: [VplDraw; MAX_DRAWS],
+    len: u8,
+    neighbours: Neighbours,
+    learns: bool,
+}
+
+impl SamplePlan {
+    /// The VPLs to evaluate.
+    pub fn draws(&self) -> &[VplDraw] {
+        &self.draws[..self.len as usize]
+    }
+
+    /// The estimate given each draw's full contribution (with visibility).
+    pub fn estimate(&self, mut contribution: impl FnMut(usize) -> Rgb) -> Rgb {
+        self.draws().iter().fold(self.offset, |acc, d| {
+            if d.weight > 0.0 {
+                acc + d.weight * contribution(d.vpl as usize)
+            } else {
+                acc
+            }
+        })
+    }
+
+    /// What the `optimized` sampler learns from draw `i` whose full contribution was
+    /// `contribution`; `None` for the other samplers. The integrator collects these in a
+    /// fixed order (e.g. by pixel) and hands them to [`ImportanceCache::optimize`].
+    pub fn feedback(&self, i: usize, contribution: Rgb) -> Option<SampleFeedback> {
+        let d = self.draws().get(i)?;
+        (self.learns && d.pdf > 0.0).then(|| {
+            SampleFeedback::new(
+                &self.neighbours,
+                d.interpolated_pmf,
+                d.interpolated_cv,
+                1.0 / d.pdf,
+                contribution,
+            )
+        })
+    }
+
+    fn push(&mut self, d: VplDraw) {
+        self.draws[self.len as usize] = d;
+        self.len += 1;
+    }
+}
+
+/// `k` uniform on `0..n` from `u ∈ [0, 1)`, pmf 1/n (Keller's one random VPL).
+pub fn sample_uniform_vpl(n: usize, u: f32) -> VplDraw {
+    if n == 0 {
+        return VplDraw::default();
+    }
+    let j = ((u * n as f32) as usize).min(n - 1);
+    VplDraw { vpl: j as u32, weight: n as f32, pdf: 1.0 / n as f32, ..VplDraw::default() }
+}
+
+impl ImportanceCache {
+    /// Draws VPLs for a shading point with neighbours `nb` (from
+    /// [`ImportanceCache::neighbours`]); `next` yields uniform numbers in `[0, 1)` (two
+    /// per draw; α-max uses two per distribution). Falls back to `uniform` when `nb` is
+    /// empty. An empty VPL set gives an empty plan (estimate 0).
+    pub fn sample(&self, kind: SamplerKind, nb: &Neighbours, next: &mut impl FnMut() -> f32) -> SamplePlan {
+        let mut plan = SamplePlan { neighbours: *nb, ..SamplePlan::default() };
+        if self.vpl_count() == 0 {
+            return plan;
+        }
+        if kind == SamplerKind::Uniform || nb.is_empty() {
+            plan.push(sample_uniform_vpl(self.vpl_count(), next()));
+            return plan;
+        }
+        match kind {
+            SamplerKind::AlphaMax => self.sample_alpha_max(&mut plan, next),
+            SamplerKind::Balance => self.sample_one(&mut plan, false, false, next),
+            SamplerKind::BalanceCv => self.sample_one(&mut plan, false, true, next),
+            _ => self.sample_one(&mut plan, true, true, next),
+        }
+        plan
+    }
+
+    /// `α_l` and `β_l` of each neighbour slot: fixed a priori or the record's optimised.
+    fn slot_weights(
+        &self,
+        nb: &Neighbours,
+        optimized: bool,
+    ) -> ([[f32; TECHNIQUES]; MAX_NEIGHBOURS], [[f32; TECHNIQUES]; MAX_NEIGHBOURS]) {
+        let (mut alpha, mut beta) =
+            ([[0.0; TECHNIQUES]; MAX_NEIGHBOURS], [[0.0; TECHNIQUES]; MAX_NEIGHBOURS]);
+        let prior = (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
+        for (s, (l, _)) in nb.iter().enumerate() {
+            (alpha[s], beta[s]) =
+                if optimized { (self.params[l].mixture(), self.params[l].beta) } else { prior };
+        }
+        (alpha, beta)
+    }
+
+    /// One-sample balance heuristic over all (record, technique) pairs, optionally with
+    /// the control variates.
+    fn sample_one(&self, plan: &mut SamplePlan, optimized: bool, cv: bool, next: &mut impl FnMut() -> f32) {
+        let nb = plan.neighbours;
+        let (alpha, beta) = self.slot_weights(&nb, optimized);
+        let techniques = self.config.distributions;
+        // Pick (l, k) with probability w_l α_lk, then j ~ p_lk.
+        let u = next();
+        let (mut acc, mut chosen) = (0.0f32, None);
+        'pick: for (s, (l, w)) in nb.iter().enumerate() {
+            for t in techniques.techniques() {
+                let pk = w * alpha[s][t as usize];
+                if pk > 0.0 {
+                    chosen = Some((l, t));
+                    acc += pk;
+                    if u < acc {
+                        break 'pick;
+                    }
+                }
+            }
+        }
+        let Some((l, t)) = chosen else {
+            plan.push(sample_uniform_vpl(self.vpl_count(), next()));
+            return;
+        };
+        let j = self.records[l].sample(t, next());
+        let mut d = VplDraw { vpl: j as u32, ..VplDraw::default() };
+        let (mut h, mut c) = (Rgb::ZERO, Rgb::ZERO);
+        for (s, (l, w)) in nb.iter().enumerate() {
+            let r = &self.records[l];
+            for t in techniques.techniques() {
+                let (k, p) = (t as usize, r.pmf(t, j));
+                d.pdf += w * alpha[s][k] * p;
+                d.interpolated_pmf[k] += w * p;
+                d.interpolated_cv[k] += w * p * r.luminance_total(t);
+                if cv {
+                    h += (w * beta[s][k] * p) * r.total(t);
+                    c += (w * beta[s][k]) * r.total(t);
+                }
+            }
+        }
+        // q(j) >= w_l α_lk p_lk(j) > 0 for the pair that drew j.
+        d.weight = 1.0 / d.pdf;
+        plan.offset = c - h * d.weight;
+        plan.learns = optimized;
+        plan.push(d);
+    }
+
+    /// Georgiev's multi-sample estimator: one draw per enabled distribution, kept where
+    /// α-max gives it the sample (draws of weight 0 are left out: no ray for them).
+    fn sample_alpha_max(&self, plan: &mut SamplePlan, next: &mut impl FnMut() -> f32) {
+        let nb = plan.neighbours;
+        let (mut techniques, mut confidences, mut m) =
+            ([Technique::Uniform; TECHNIQUES], [0.0f32; TECHNIQUES], 0);
+        for t in self.config.distributions.techniques() {
+            (techniques[m], confidences[m]) = (t, self.config.confidences[t as usize]);
+            m += 1;
+        }
+        let (techniques, confidences) = (&techniques[..m], &confidences[..m]);
+        for (own, &t) in techniques.iter().enumerate() {
+            let (u, mut acc, mut l) = (next(), 0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
+            for (slot, w) in nb.iter() {
+                l = slot;
+                acc += w;
+                if u < acc {
+                    break;
+                }
+            }
+            let j = self.records[l].sample(t, next());
+            let mut pmfs = [0.0f32; TECHNIQUES];
+            for (i, &ti) in techniques.iter().enumerate() {
+                pmfs[i] = nb.iter().map(|(l, w)| w * self.records[l].pmf(ti, j)).sum();
+            }
+            if alpha_max_owner(&pmfs[..m], confidences) == own && pmfs[own] > 0.0 {
+                let mut d = VplDraw { vpl: j as u32, weight: 1.0 / pmfs[own], ..VplDraw::default() };
+                for (i, &ti) in techniques.iter().enumerate() {
+                    d.interpolated_pmf[ti as usize] = pmfs[i];
+                }
+                plan.push(d);
+            }
+        }
+    }
+}

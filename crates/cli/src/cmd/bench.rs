@@ -15,6 +15,8 @@ pub enum Which {
     Pipeline(super::bench_pipeline::Args),
     /// Adaptive sampling overheads (importance map, apportionment, batches).
     Adaptive(super::bench_adaptive::Args),
+    /// VPL renderer milliseconds per stage (generation, cache, shading, optimisation).
+    Vpl(super::bench_vpl::Args),
 }
 
 pub fn run(which: Which) -> anyhow::Result<()> {
@@ -24,5 +26,6 @@ pub fn run(which: Which) -> anyhow::Result<()> {
         Which::Render(a) => super::bench_render::run(a),
         Which::Pipeline(a) => super::bench_pipeline::run(a),
         Which::Adaptive(a) => super::bench_adaptive::run(a),
+        Which::Vpl(a) => super::bench_vpl::run(a),
     }
 }

@@ -106,6 +106,8 @@ pub struct Args {
     pub filter: FilterArgs,
     #[command(flatten)]
     pub adaptive: AdaptiveArgs,
+    #[command(flatten)]
+    pub vpl: super::render_vpl::VplArgs,
 }
 
 /// An image size parsed from `WxH`.
@@ -405,6 +407,9 @@ struct Summary {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.vpl.enabled() {
+        return super::render_vpl::run(&args.common, &args.vpl);
+    }
     // The filtered pipeline (and adaptive sampling, which drives it) lives in
     // `render_filtered` (pipeline engineer).
     if args.filter.enabled() || args.adaptive.adaptive {

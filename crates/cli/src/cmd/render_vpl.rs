@@ -44,7 +44,7 @@ pub struct VplArgs {
     pub ground_truth: bool,
     /// Bound the geometry term's 1/r² below this distance, as a fraction of the scene's
     /// bounding radius (thesis 4.2.3; darkens short-range light; default off: unbiased).
-    #[arg(long, value_parser = super::args::finite_f32)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::args::finite_f32)]
     pub vpl_clamp: Option<f32>,
 }
 

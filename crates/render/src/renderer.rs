@@ -29,7 +29,7 @@
 
 use crate::camera::PinholeCamera;
 use crate::film::{Film, FilmPixel};
-use crate::integrator::lockstep::{self, LaneStats, LockstepContext, RayQueries};
+use crate::integrator::lockstep::{self, LaneStats, LockstepContext, LockstepTables, RayQueries};
 use crate::integrator::pool::{Pool, POOL};
 use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
 use crate::lights::LightSet;
@@ -158,6 +158,7 @@ pub struct Renderer {
     accel: SceneAccel,
     lights: LightSet,
     geometry: SceneGeometry,
+    lockstep_tables: LockstepTables,
     camera: PinholeCamera,
     integrator: IntegratorKind,
     trace_mode: TraceMode,
@@ -174,6 +175,7 @@ impl Renderer {
         let accel = SceneAccel::build(&scene);
         let lights = LightSet::build(&scene);
         let geometry = SceneGeometry::new(&scene);
+        let lockstep_tables = LockstepTables::new(&scene, &geometry, &lights);
         let build_seconds = start.elapsed().as_secs_f64();
         let cam = scene.camera.clone().unwrap_or_else(|| PinholeCamera::framing(&scene.bounds()));
         let camera = PinholeCamera::new(&cam, settings.width, settings.height);
@@ -183,6 +185,7 @@ impl Renderer {
             accel,
             lights,
             geometry,
+            lockstep_tables,
             camera,
             integrator: IntegratorKind::Path,
             trace_mode: TraceMode::default(),
@@ -415,6 +418,7 @@ impl Renderer {
         let width = self.settings.width as usize;
         let lc = LockstepContext {
             ctx: self.context(),
+            tables: &self.lockstep_tables,
             params: self.path_params(),
             camera: &self.camera,
             queries: self.ray_queries,

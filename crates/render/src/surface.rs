@@ -54,31 +54,6 @@ pub struct SceneGeometry {
     tris: Vec<TriangleRecord>,
     /// Per material: its BSDF when it does not depend on `uv`, else `None`.
     constant_bsdfs: Vec<Option<SurfaceBsdf>>,
-    /// For scenes with at most eight materials: their flags and Lambert reflectances as
-    /// eight-entry tables.
-    small_materials: Option<Box<SmallMaterials>>,
-    /// For scenes of at most eight instances, none with vertex normals or uvs: each
-    /// instance's first row in `tris` (lane `i` = instance `i`).
-    plain_first_tris: Option<[u32; 8]>,
-}
-
-/// [`SmallMaterials::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
-/// constant_diffuse`] is `Some`).
-pub(crate) const MAT_DIFFUSE: u32 = 1;
-/// Flag: the material emits (`is_emissive()` and a non-zero emission).
-pub(crate) const MAT_EMITS: u32 = 2;
-/// Flag: the emission is two-sided.
-pub(crate) const MAT_TWO_SIDED: u32 = 4;
-
-/// The materials of a scene with at most eight of them as eight-entry tables (lane `m` =
-/// material `m`), for the lockstep integrator's lookups by `vpermps`
-/// ([`crate::integrator::lanes::lookup8`]): flags ([`MAT_DIFFUSE`], [`MAT_EMITS`],
-/// [`MAT_TWO_SIDED`]) and the reflectance of the untextured Lambert ones (zero for the
-/// others). Only built when every triangle's material is in range.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct SmallMaterials {
-    pub(crate) flags: [u32; 8],
-    pub(crate) rho: [[f32; 8]; 3],
 }
 
 /// Per-instance data of [`SceneGeometry`].
@@ -132,8 +107,6 @@ impl SceneGeometry {
             instances: Vec::with_capacity(scene.instances.len()),
             tris: Vec::with_capacity(scene.triangle_count()),
             constant_bsdfs,
-            small_materials: None,
-            plain_first_tris: None,
         };
         for (ii, inst) in scene.instances.iter().enumerate() {
             let inv = inst.transform.matrix3.inverse();
@@ -155,42 +128,7 @@ impl SceneGeometry {
                 });
             }
         }
-        if g.instances.len() <= 8 && g.instances.iter().all(|i| !i.has_normals && !i.has_uvs) {
-            let mut first = [0u32; 8];
-            for (f, inst) in first.iter_mut().zip(&g.instances) {
-                *f = inst.first_tri;
-            }
-            g.plain_first_tris = Some(first);
-        }
-        let n = scene.materials.len();
-        if n <= 8 && g.tris.iter().all(|t| (t.material as usize) < n) {
-            let mut t = SmallMaterials::default();
-            for (i, m) in scene.materials.iter().enumerate() {
-                let rho = g.constant_diffuse(i as MaterialId);
-                let emits = m.is_emissive() && m.emission != filtrace_core::Rgb::ZERO;
-                t.flags[i] = if rho.is_some() { MAT_DIFFUSE } else { 0 }
-                    | if emits { MAT_EMITS } else { 0 }
-                    | if m.two_sided_emission { MAT_TWO_SIDED } else { 0 };
-                let r = rho.unwrap_or(filtrace_core::Rgb::ZERO);
-                (t.rho[0][i], t.rho[1][i], t.rho[2][i]) = (r.x, r.y, r.z);
-            }
-            g.small_materials = Some(Box::new(t));
-        }
         g
-    }
-
-    /// For scenes of at most eight instances without vertex normals and uvs: the first
-    /// row of each instance's triangles in [`Self::tri_words`] (triangle `prim` of
-    /// instance `i` is row `first[i] + prim`, as in [`Self::plain_row`]).
-    #[inline]
-    pub(crate) fn plain_first_tris(&self) -> Option<&[u32; 8]> {
-        self.plain_first_tris.as_ref()
-    }
-
-    /// [`SmallMaterials`] of scenes with at most eight materials.
-    #[inline]
-    pub(crate) fn small_materials(&self) -> Option<&SmallMaterials> {
-        self.small_materials.as_deref()
     }
 
     #[inline]

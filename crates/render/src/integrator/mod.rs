@@ -11,6 +11,11 @@
 //! `color = direct + indirect` exactly (the colour is *defined* as that sum), as the filtered
 //! pipeline of Bauszat et al. 2011 needs them apart.
 //!
+//! The [`Integrator`] trait is the seam for more estimators: each frame first runs its
+//! [`Integrator::prepare`] (a VPL renderer generates its virtual point lights there; the
+//! path tracers do nothing), then traces its pixels with [`Integrator::li`] (pbrt-v4
+//! `cpu/integrators.h`, whose integrators own their `Render()` passes).
+//!
 //! Path depth follows Mitsuba's `max_depth` convention: the number of path *segments*
 //! (camera segment included). 1 = emitters seen directly only, 2 = direct light only,
 //! 8 = up to 7 bounces (the default), -1 = unbounded (Russian roulette ends paths).
@@ -21,12 +26,14 @@ pub mod lockstep;
 pub mod path;
 pub mod pool;
 pub mod sampler8;
+pub(crate) mod sampling8;
 
 use crate::bsdf::SurfaceBsdf;
 use crate::film::{PixelSample, VisibleSurface};
 use crate::lights::LightSet;
 use crate::surface::{SceneGeometry, SurfaceInteraction};
 use filtrace_accel::SceneAccel;
+use filtrace_core::sampler::Sampler;
 use filtrace_core::{Ray, Rgb};
 use filtrace_scene::Scene;
 
@@ -107,6 +114,92 @@ impl<'a> PathContext<'a> {
             m.emission
         } else {
             Rgb::ZERO
+        }
+    }
+}
+
+/// What an integrator's per-frame preparation sees: the frame's world and its number.
+#[derive(Clone, Copy)]
+pub struct FrameContext<'a> {
+    pub ctx: PathContext<'a>,
+    pub params: PathParams,
+    /// Frame number of an animation (0 for a still).
+    pub frame: u32,
+    /// The render's seed (random numbers of `prepare` derive from it and `frame`).
+    pub seed: u64,
+}
+
+/// An estimator of the radiance along camera rays, with a per-frame preparation step.
+pub trait Integrator: Sync {
+    /// Work done once per frame before any pixel is traced, for the world of `frame`
+    /// (after its instances and lights moved). Default: nothing.
+    fn prepare(&mut self, frame: &FrameContext) {
+        let _ = frame;
+    }
+
+    /// The camera sample along `ray` (unit direction): radiance split at the first bounce
+    /// and, when `want_surface`, the visible surface. `sampler` is the pixel's, for this
+    /// sample index.
+    fn li(
+        &self,
+        ctx: &PathContext,
+        params: &PathParams,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want_surface: bool,
+    ) -> CameraSample;
+}
+
+/// The path tracer of [`path`] (next-event estimation + MIS); nothing to prepare.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathIntegrator;
+
+impl Integrator for PathIntegrator {
+    #[inline]
+    fn li(
+        &self,
+        ctx: &PathContext,
+        params: &PathParams,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want: bool,
+    ) -> CameraSample {
+        path::li(ctx, params, ray, sampler, want)
+    }
+}
+
+/// The BSDF-sampling reference of [`bsdf_only`]; nothing to prepare.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BsdfOnlyIntegrator;
+
+impl Integrator for BsdfOnlyIntegrator {
+    #[inline]
+    fn li(
+        &self,
+        ctx: &PathContext,
+        params: &PathParams,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want: bool,
+    ) -> CameraSample {
+        bsdf_only::li(ctx, params, ray, sampler, want)
+    }
+}
+
+/// The renderer's built-in choice, dispatched without `dyn` (a closed set).
+impl Integrator for crate::renderer::IntegratorKind {
+    #[inline]
+    fn li(
+        &self,
+        ctx: &PathContext,
+        params: &PathParams,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want: bool,
+    ) -> CameraSample {
+        match self {
+            Self::Path => PathIntegrator.li(ctx, params, ray, sampler, want),
+            Self::BsdfOnly => BsdfOnlyIntegrator.li(ctx, params, ray, sampler, want),
         }
     }
 }
@@ -209,5 +302,56 @@ impl VertexSamples {
     pub fn russian_roulette(sampler: &mut filtrace_core::sampler::Sampler, vertex: u32) -> f32 {
         sampler.set_slot(vertex_slot(vertex) + SLOT_RR);
         sampler.next_1d()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::renderer::{IntegratorKind, RenderSettings, Renderer};
+
+    /// An integrator whose `li` depends on what `prepare` computed from the frame (as a
+    /// VPL renderer's lights do).
+    struct Prepared(Option<Rgb>);
+
+    impl Integrator for Prepared {
+        fn prepare(&mut self, frame: &FrameContext) {
+            self.0 = Some(Rgb::splat(frame.ctx.lights.len() as f32 * (frame.frame + 1) as f32));
+        }
+        fn li(&self, _: &PathContext, _: &PathParams, _: &Ray, _: &mut Sampler, _: bool) -> CameraSample {
+            let direct = self.0.expect("prepare runs before li");
+            CameraSample { radiance: Split { direct, indirect: Rgb::ZERO }, surface: None }
+        }
+    }
+
+    /// The built-in integrators through the trait give what their functions give (their
+    /// `prepare` is a no-op), and a prepared integrator sees the frame it was prepared for.
+    #[test]
+    fn integrators_through_the_trait() {
+        let scene = filtrace_scene::builtin("cornell").unwrap();
+        let settings = RenderSettings { width: 8, height: 8, spp: 1, max_depth: 8, seed: 1 };
+        let r = Renderer::new(scene, settings.clone()).unwrap();
+        let (ctx, params) = (r.context(), r.path_params());
+        let frame = FrameContext { ctx, params, frame: 0, seed: 1 };
+        for kind in [IntegratorKind::Path, IntegratorKind::BsdfOnly] {
+            let reference = Renderer::new(r.scene().clone(), settings.clone()).unwrap().with_integrator(kind);
+            let mut integrator = kind;
+            integrator.prepare(&frame);
+            assert_eq!(integrator, kind);
+            for (x, y) in [(3, 4), (0, 0), (7, 2)] {
+                let want = reference.trace_sample(x, y, 0);
+                let mut sampler = r.sampler(x, y, 0);
+                sampler.set_slot(SLOT_PIXEL);
+                let ray = r.camera().sample_ray(x, y, 0, sampler.next_2d());
+                assert_eq!(integrator.li(&ctx, &params, &ray, &mut sampler, true), want, "{kind:?}");
+            }
+        }
+        let mut prepared = Prepared(None);
+        let ray = Ray::new(filtrace_core::Vec3::ZERO, filtrace_core::Vec3::Y);
+        for f in 0..3 {
+            prepared.prepare(&FrameContext { frame: f, ..frame });
+            let s = prepared.li(&ctx, &params, &ray, &mut r.sampler(0, 0, 0), false);
+            assert_eq!(s.radiance.direct, Rgb::splat(ctx.lights.len() as f32 * (f + 1) as f32));
+        }
     }
 }

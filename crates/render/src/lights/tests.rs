@@ -5,7 +5,7 @@ use super::*;
 use crate::bsdf::tests::Rng;
 use filtrace_core::stats::{chi2_sphere, integrate_sphere, Chi2Params};
 use filtrace_core::{luminance, Affine3A, Vec3};
-use filtrace_scene::{Instance, Material, Mesh};
+use filtrace_scene::{Environment, Instance, Light as SceneLight, Material, Mesh, Scene};
 use std::f32::consts::PI;
 
 /// A quad mesh `(c, c + a, c + a + b, c + b)`; front face along `a × b`.
@@ -25,7 +25,7 @@ fn emitter(le: Vec3, two_sided: bool) -> Material {
 
 /// Floor (not emissive), a one-sided 1×1 ceiling quad facing down with Le = 5, and a
 /// two-sided 2×0.5 quad placed by an instance transform with Le = (1, 2, 3), plus a sky.
-fn test_scene(with_env: bool) -> Scene {
+pub(super) fn test_scene(with_env: bool) -> Scene {
     let mut s = Scene::default();
     let grey = s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
     let bright = s.add_material(emitter(Vec3::splat(5.0), false));
@@ -42,7 +42,7 @@ fn test_scene(with_env: bool) -> Scene {
         material_override: None,
     });
     if with_env {
-        s.lights.push(Light::Environment(Environment::Sky {
+        s.lights.push(SceneLight::Environment(Environment::Sky {
             zenith: Vec3::new(0.1, 0.2, 0.6),
             horizon: Vec3::new(0.6, 0.6, 0.7),
             ground: Vec3::splat(0.05),
@@ -119,7 +119,7 @@ fn build_gathers_world_space_emitters() {
     assert_eq!(lights.area_light_index(2, 9), None);
     // The side light was moved to x = 2.5 by its instance transform.
     let i = lights.area_light_index(2, 0).unwrap();
-    let LightKind::Area(a) = &lights.lights[i] else { panic!("not an area light") };
+    let Some(a) = lights.area_light(i) else { panic!("not an area light") };
     assert!((a.p0.x - 2.5).abs() < 1e-6 && (a.area - 0.5).abs() < 1e-6);
 }
 
@@ -131,13 +131,13 @@ fn selection_is_proportional_to_power() {
     // Ceiling triangles: π · 0.5 · 5; side triangles: π · 0.5 · lum(1,2,3) · 2.
     let p_ceiling = PI * 0.5 * 5.0;
     let p_side = PI * 0.5 * luminance(Vec3::new(1.0, 2.0, 3.0)) * 2.0;
-    let p_env = lights.selection_pmf(lights.env_index as usize);
+    let p_env = lights.selection_pmf(lights.len() - 1);
     // Total power, recovered from the area lights' share.
     let total = (2.0 * p_ceiling + 2.0 * p_side) / (1.0 - p_env);
     assert!((lights.selection_pmf(lights.area_light_index(1, 0).unwrap()) - p_ceiling / total).abs() < 1e-5);
     assert!((lights.selection_pmf(lights.area_light_index(2, 1).unwrap()) - p_side / total).abs() < 1e-5);
     // Environment power: π R² · π · mean luminance, the mean from a fine quadrature.
-    let env = lights.environment.as_ref().unwrap();
+    let env = lights.environment().unwrap();
     // The sky varies with y: put y on the quadrature's polar axis (z).
     let mean = integrate_sphere(|d| luminance(env.radiance(Vec3::new(d.x, d.z, d.y))) as f64, 64, 4, 4)
         / (4.0 * std::f64::consts::PI);
@@ -242,7 +242,7 @@ fn one_sided_emitters_are_dark_from_behind() {
 fn point_light_inverse_square() {
     let mut scene = Scene::default();
     let i = Vec3::new(10.0, 20.0, 30.0);
-    scene.lights.push(Light::Point { position: Vec3::new(0.0, 4.0, 0.0), intensity: i });
+    scene.lights.push(SceneLight::Point { position: Vec3::new(0.0, 4.0, 0.0), intensity: i });
     let lights = LightSet::build(&scene);
     for d in [0.5f32, 1.0, 3.0] {
         let p = Vec3::new(0.0, 4.0 - d, 0.0);
@@ -267,7 +267,7 @@ fn spot_falloff_values_and_power() {
     assert!((spot.falloff(c25) - t * t * (3.0 - 2.0 * t)).abs() < 1e-6);
     // Through the LightSet: a point 2 below the light, 25° off axis.
     let mut scene = Scene::default();
-    scene.lights.push(Light::Spot {
+    scene.lights.push(SceneLight::Spot {
         position: Vec3::ZERO,
         direction: -Vec3::Y,
         intensity: i,
@@ -290,7 +290,7 @@ fn directional_light_is_a_delta() {
     let mut scene = test_scene(false);
     scene
         .lights
-        .push(Light::Directional { direction: Vec3::new(0.0, 2.0, 0.0), irradiance: Vec3::splat(3.0) });
+        .push(SceneLight::Directional { direction: Vec3::new(0.0, 2.0, 0.0), irradiance: Vec3::splat(3.0) });
     let lights = LightSet::build(&scene);
     let r = scene.bounds().bounding_radius();
     let idx = lights.len() - 1;
@@ -308,7 +308,7 @@ fn directional_light_is_a_delta() {
 #[test]
 fn constant_environment_irradiance() {
     let mut scene = Scene::default();
-    scene.lights.push(Light::Environment(Environment::Constant { radiance: Vec3::splat(2.0) }));
+    scene.lights.push(SceneLight::Environment(Environment::Constant { radiance: Vec3::splat(2.0) }));
     let lights = LightSet::build(&scene);
     assert!((lights.pdf_environment(Vec3::new(0.3, -0.5, 0.1).normalize()) - 1.0 / (4.0 * PI)).abs() < 1e-6);
     let mut rng = Rng::new(51);
@@ -367,16 +367,16 @@ fn bad_input_is_skipped_not_a_panic() {
     s.add_mesh(quad(Vec3::ZERO, Vec3::X, Vec3::Z, 99)); // unknown material
     s.add_mesh(quad(Vec3::ZERO, Vec3::X, Vec3::Z, nan)); // NaN emission
     s.instances.push(Instance { mesh: 42, transform: Affine3A::IDENTITY, material_override: None });
-    s.lights.push(Light::Spot {
+    s.lights.push(SceneLight::Spot {
         position: Vec3::ZERO,
         direction: Vec3::ZERO,
         intensity: Vec3::ONE,
         cos_total_width: 0.5,
         cos_falloff_start: 0.9,
     });
-    s.lights.push(Light::Point { position: Vec3::splat(f32::INFINITY), intensity: Vec3::ONE });
-    s.lights.push(Light::Directional { direction: Vec3::ZERO, irradiance: Vec3::ONE });
-    s.lights.push(Light::Environment(Environment::Constant { radiance: Vec3::ZERO }));
+    s.lights.push(SceneLight::Point { position: Vec3::splat(f32::INFINITY), intensity: Vec3::ONE });
+    s.lights.push(SceneLight::Directional { direction: Vec3::ZERO, irradiance: Vec3::ONE });
+    s.lights.push(SceneLight::Environment(Environment::Constant { radiance: Vec3::ZERO }));
     let lights = LightSet::build(&s);
     assert!(lights.is_empty(), "{} lights", lights.len());
     assert!(lights.skipped() >= 8, "skipped {}", lights.skipped());
@@ -392,7 +392,7 @@ fn chi2_rejects_area_measure_pdf() {
     let wrong = |d: Vec3| -> f64 {
         let Some((i, prim, _, _)) = nearest_emitter(&scene, P, d) else { return 0.0 };
         let idx = lights.area_light_index(i, prim).unwrap();
-        let LightKind::Area(a) = &lights.lights[idx] else { return 0.0 };
+        let Some(a) = lights.area_light(idx) else { return 0.0 };
         (lights.selection_pmf(idx) / a.area) as f64
     };
     let params = Chi2Params { samples: 100_000, ..Chi2Params::standard() };
@@ -410,8 +410,8 @@ fn area_lookup_matches_brute_force() {
         let mesh = &scene.meshes[inst.mesh as usize];
         for prim in 0..mesh.triangle_count() {
             let t = mesh.triangle(prim).map(|v| inst.transform.transform_point3(v));
-            let brute = lights.lights.iter().position(|l| match l {
-                LightKind::Area(a) => (a.p0 - t[0]).length() < 1e-6 && (a.p0 + a.e1 - t[1]).length() < 1e-6,
+            let brute = lights.lights().iter().position(|l| match l {
+                Light::Area(a) => (a.p0 - t[0]).length() < 1e-6 && (a.p0 + a.e1 - t[1]).length() < 1e-6,
                 _ => false,
             });
             assert_eq!(lights.area_light_index(ii as u32, prim as u32), brute, "instance {ii} prim {prim}");

@@ -1,0 +1,211 @@
+//! The lookup tables of the lockstep tracer, owned by it and built from the scene, its
+//! [`SceneGeometry`] and its [`LightSet`]: eight-entry tables for scenes with at most eight
+//! materials, instances or lights (one `vpermps` per field, [`lookup8`](super::super::
+//! lanes::lookup8)), and the area lights as rows of words (transposed into lanes by
+//! [`columns`](super::super::lanes::columns)). Every value is one the scalar code reads,
+//! so a lane looks up what the scalar path computes.
+//!
+//! The material and instance tables depend on the scene's layout only; the light tables
+//! on the lights' world-space triangles and the selection: after
+//! [`LightSet::update_instances`] call [`LockstepTables::update_lights`].
+
+use crate::lights::LightSet;
+use crate::surface::{SceneGeometry, TRI_FLOATS};
+use filtrace_core::Rgb;
+use filtrace_scene::{MaterialId, Scene};
+
+/// [`SmallMaterials::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
+/// constant_diffuse`] is `Some`).
+pub(crate) const MAT_DIFFUSE: u32 = 1;
+/// Flag: the material emits (`is_emissive()` and a non-zero emission).
+pub(crate) const MAT_EMITS: u32 = 2;
+/// Flag: the emission is two-sided.
+pub(crate) const MAT_TWO_SIDED: u32 = 4;
+
+/// Words per light in [`LockstepTables::area_words`]: `p0`, `e1`, `e2`, `n` (xyz each) at
+/// 0..12, the area at 12 and `le` (rgb) at 13..16 (zeros for a light that is not an area
+/// light).
+pub(crate) const AREA_FLOATS: usize = 16;
+
+/// The materials of a scene with at most eight of them as eight-entry tables (lane `m` =
+/// material `m`): flags ([`MAT_DIFFUSE`], [`MAT_EMITS`], [`MAT_TWO_SIDED`]) and the
+/// reflectance of the untextured Lambert ones (zero for the others). Only built when every
+/// triangle's material is in range.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SmallMaterials {
+    pub(crate) flags: [u32; 8],
+    pub(crate) rho: [[f32; 8]; 3],
+}
+
+/// The selection table and the area lights of a scene with one to eight lights as
+/// eight-entry tables, one per field (lane `k` = light or cell `k`). The values are those
+/// `AliasTable::sample` and [`LightSet::area_light`] read.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SmallLights {
+    /// Number of cells (= lights).
+    pub(crate) n: u32,
+    /// Per cell: `q`, `alias` (0 for a single cell: `sample` returns cell 0), `pmf`.
+    pub(crate) q: [f32; 8],
+    pub(crate) alias: [u32; 8],
+    pub(crate) pmf: [f32; 8],
+    /// Per light: `u32::MAX` for an area light, else 0; the same for two-sided ones.
+    pub(crate) is_area: [u32; 8],
+    pub(crate) two_sided: [u32; 8],
+    /// Per field of the area words (`AREA_FLOATS` of them): its value per light.
+    pub(crate) field: [[f32; 8]; AREA_FLOATS],
+}
+
+/// Everything the lockstep tracer looks up in tables (see the module docs).
+#[derive(Clone, Debug, Default)]
+pub struct LockstepTables {
+    small_materials: Option<Box<SmallMaterials>>,
+    /// For scenes of at most eight instances, none with vertex normals or uvs: each
+    /// instance's first row in [`SceneGeometry::tri_words`] (lane `i` = instance `i`).
+    plain_first_tris: Option<[u32; 8]>,
+    /// Per light [`AREA_FLOATS`] words: the values of [`LightSet::area_light`].
+    area_words: Vec<f32>,
+    small_lights: Option<Box<SmallLights>>,
+}
+
+impl LockstepTables {
+    /// The tables of `scene` with its geometry and lights.
+    pub fn new(scene: &Scene, geometry: &SceneGeometry, lights: &LightSet) -> Self {
+        let mut t = LockstepTables {
+            small_materials: small_materials(scene, geometry).map(Box::new),
+            plain_first_tris: plain_first_tris(scene, geometry),
+            ..Default::default()
+        };
+        t.update_lights(lights);
+        t
+    }
+
+    /// Rebuilds the light tables from `lights` (after [`LightSet::update_instances`]):
+    /// O(lights), no scene traversal.
+    pub fn update_lights(&mut self, lights: &LightSet) {
+        self.area_words.clear();
+        self.area_words.reserve(lights.len() * AREA_FLOATS);
+        for i in 0..lights.len() {
+            match lights.area_light(i) {
+                Some(a) => {
+                    for v in [a.p0, a.e1, a.e2, a.n] {
+                        self.area_words.extend_from_slice(&[v.x, v.y, v.z]);
+                    }
+                    self.area_words.push(a.area);
+                    self.area_words.extend_from_slice(&[a.le.x, a.le.y, a.le.z]);
+                }
+                None => self.area_words.extend_from_slice(&[0.0; AREA_FLOATS]),
+            }
+        }
+        self.small_lights = small_lights(lights, &self.area_words).map(Box::new);
+    }
+
+    /// [`SmallMaterials`] of scenes with at most eight materials.
+    #[inline]
+    pub(crate) fn small_materials(&self) -> Option<&SmallMaterials> {
+        self.small_materials.as_deref()
+    }
+
+    /// For scenes of at most eight instances without vertex normals and uvs: the first
+    /// row of each instance's triangles in [`SceneGeometry::tri_words`] (triangle `prim` of
+    /// instance `i` is row `first[i] + prim`, as in [`SceneGeometry::plain_row`]).
+    #[inline]
+    pub(crate) fn plain_first_tris(&self) -> Option<&[u32; 8]> {
+        self.plain_first_tris.as_ref()
+    }
+
+    /// The area lights as rows of [`AREA_FLOATS`] words (row `i` = light `i`).
+    #[inline]
+    pub(crate) fn area_words(&self) -> &[f32] {
+        &self.area_words
+    }
+
+    /// [`SmallLights`] of scenes with one to eight lights.
+    #[inline]
+    pub(crate) fn small_lights(&self) -> Option<&SmallLights> {
+        self.small_lights.as_deref()
+    }
+}
+
+fn plain_first_tris(scene: &Scene, geometry: &SceneGeometry) -> Option<[u32; 8]> {
+    let n = scene.instances.len();
+    if n > 8 {
+        return None;
+    }
+    let mut first = [0u32; 8];
+    for (i, f) in first.iter_mut().enumerate().take(n) {
+        *f = geometry.plain_row(i as u32, 0)? as u32;
+    }
+    Some(first)
+}
+
+fn small_materials(scene: &Scene, geometry: &SceneGeometry) -> Option<SmallMaterials> {
+    let n = scene.materials.len();
+    let in_range = |row: &[f32]| (row[TRI_FLOATS - 1].to_bits() as usize) < n;
+    if n > 8 || !geometry.tri_words().chunks_exact(TRI_FLOATS).all(in_range) {
+        return None;
+    }
+    let mut t = SmallMaterials::default();
+    for (i, m) in scene.materials.iter().enumerate() {
+        let rho = geometry.constant_diffuse(i as MaterialId);
+        let emits = m.is_emissive() && m.emission != Rgb::ZERO;
+        t.flags[i] = if rho.is_some() { MAT_DIFFUSE } else { 0 }
+            | if emits { MAT_EMITS } else { 0 }
+            | if m.two_sided_emission { MAT_TWO_SIDED } else { 0 };
+        let r = rho.unwrap_or(Rgb::ZERO);
+        (t.rho[0][i], t.rho[1][i], t.rho[2][i]) = (r.x, r.y, r.z);
+    }
+    Some(t)
+}
+
+fn small_lights(lights: &LightSet, area_words: &[f32]) -> Option<SmallLights> {
+    let table = lights.sampler().table();
+    let n = table.count();
+    if !(1..=8).contains(&n) || lights.len() != n {
+        return None;
+    }
+    let mut t = SmallLights { n: n as u32, ..Default::default() };
+    for i in 0..n {
+        let (q, alias) = table.bin(i)?;
+        if alias as usize >= n {
+            return None;
+        }
+        t.q[i] = q;
+        t.alias[i] = if n == 1 { 0 } else { alias };
+        t.pmf[i] = table.pmf(i);
+        if let Some(a) = lights.area_light(i) {
+            t.is_area[i] = u32::MAX;
+            t.two_sided[i] = if a.two_sided { u32::MAX } else { 0 };
+        }
+        for (f, w) in t.field.iter_mut().zip(&area_words[i * AREA_FLOATS..(i + 1) * AREA_FLOATS]) {
+            f[i] = *w;
+        }
+    }
+    Some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use filtrace_core::{Affine3A, Vec3};
+
+    /// After moving an instance, `LightSet::update_instances` + `update_lights` give the
+    /// tables a build from the moved scene gives (the Cornell box: at most eight lights, so
+    /// `SmallLights` too; its light moved).
+    #[test]
+    fn updated_light_tables_equal_rebuilt_ones() {
+        let mut scene = filtrace_scene::builtin("cornell").unwrap();
+        let geometry = SceneGeometry::new(&scene);
+        let mut lights = LightSet::build(&scene);
+        let mut tables = LockstepTables::new(&scene, &geometry, &lights);
+        assert!(tables.small_lights().is_some() && tables.small_materials().is_some());
+        let light = (0..scene.instances.len() as u32)
+            .find(|&i| lights.area_light_index(i, 0).is_some() || lights.area_light_index(i, 1).is_some())
+            .expect("the Cornell box has an emissive instance");
+        scene.instances[light as usize].transform = Affine3A::from_translation(Vec3::new(30.0, -20.0, 10.0))
+            * scene.instances[light as usize].transform;
+        lights.update_instances(&scene, &[light]);
+        tables.update_lights(&lights);
+        let rebuilt = LockstepTables::new(&scene, &SceneGeometry::new(&scene), &LightSet::build(&scene));
+        assert_eq!(format!("{tables:?}"), format!("{rebuilt:?}"));
+    }
+}

@@ -21,8 +21,9 @@
 //!
 //! (ρ relative to G keeps the barrier's pull independent of the scene's brightness). One
 //! damped Newton step per record per frame: the Newton direction, then backtracking (t =
-//! 1, 1/2, ..., 1/16) on the same samples' estimate of f' until the Armijo condition
-//! holds (Boyd and Vandenberghe 9.5); no step if none does.
+//! 1, 1/2, ..., 1/512 of the largest step that stays 99 % inside the domain) on the same
+//! samples' estimate of f' until the Armijo condition holds (Boyd and Vandenberghe 9.5);
+//! no step if none does.
 
 // Index loops over the small matrices read as the formulas they implement.
 #![allow(clippy::needless_range_loop)]
@@ -34,8 +35,12 @@ use rayon::prelude::*;
 
 /// Variables of one record: α' and β of up to 4 techniques.
 const MAX_VARS: usize = 2 * TECHNIQUES;
-/// Step sizes tried by the backtracking line search.
-const STEPS: [f64; 5] = [1.0, 0.5, 0.25, 0.125, 0.0625];
+/// Step sizes tried by the backtracking line search, as fractions of the largest step
+/// that keeps 1 % of the way to the barrier's boundary.
+const STEPS: [f64; 10] =
+    [1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625, 0.0078125, 0.00390625, 0.001953125];
+/// Fraction of the distance to the domain's boundary a step may cover.
+const TO_BOUNDARY: f64 = 0.99;
 /// Armijo sufficient-decrease constant.
 const ARMIJO: f64 = 0.25;
 
@@ -381,13 +386,20 @@ where
         return keep(g0);
     }
     // Backtracking on the sampled f' at the trial points, all in one pass.
-    let trials: Vec<[f64; MAX_VARS]> = STEPS
+    let t_max = max_feasible_step(&x[..j], &dx[..j], &eps).min(1.0);
+    let steps = STEPS.map(|t| t * t_max);
+    let trials: Vec<[f64; MAX_VARS]> = steps
         .iter()
         .map(|&t| std::array::from_fn(|i| if i < dim { x[i] + t * dx[i] } else { 0.0 }))
         .collect();
     let f0 = g0 + barrier(&x, &eps, rho);
-    let values = objectives(&trials, dim, ts, samples);
-    for (s, &t) in STEPS.iter().enumerate() {
+    // The full step usually passes near the optimum: try it and its half first, and
+    // replay the samples for the shorter steps only when both fail.
+    let mut values = objectives(&trials[..2], dim, ts, samples.clone());
+    for (s, &t) in steps.iter().enumerate() {
+        if s == values.len() {
+            values.extend(objectives(&trials[s..], dim, ts, samples.clone()));
+        }
         let f = values[s] + barrier(&trials[s], &eps, rho);
         if f.is_finite() && f <= f0 - ARMIJO * t * decrement {
             let mut out = *params;
@@ -409,6 +421,22 @@ where
         }
     }
     keep(g0)
+}
+
+/// The largest `t` (times [`TO_BOUNDARY`]) with `α' + t dα` inside `α'_k > ε_k`,
+/// `Σ α'_k < 1`.
+fn max_feasible_step(alpha: &[f64], d_alpha: &[f64], eps: &[f64]) -> f64 {
+    let mut t = f64::INFINITY;
+    for k in 0..alpha.len() {
+        if d_alpha[k] < 0.0 {
+            t = t.min((alpha[k] - eps[k]) / -d_alpha[k]);
+        }
+    }
+    let d_sum: f64 = d_alpha.iter().sum();
+    if d_sum > 0.0 {
+        t = t.min((1.0 - alpha.iter().sum::<f64>()) / d_sum);
+    }
+    TO_BOUNDARY * t
 }
 
 /// Adds the barrier's gradient and Hessian (α' block only).

@@ -127,7 +127,8 @@ impl ImportanceCache {
     /// depend on the thread count) and builds the distributions. `scene_diagonal` is D
     /// of λ = `lambda_scale` · D. `previous`: the last frame's cache, whose optimised
     /// parameters are interpolated at the new records (M nearest, same weights as
-    /// shading); without it the parameters start a priori.
+    /// shading; a record at distance 0 of an old one copies it); without it the
+    /// parameters start a priori.
     pub fn build(
         vpls: &impl VplSet,
         points: Vec<CachePoint>,
@@ -169,7 +170,12 @@ impl ImportanceCache {
             .map(|r| match previous {
                 Some(prev) if !prev.records.is_empty() => {
                     let nb = prev.neighbours(r.point.position, r.point.normal);
-                    RecordParams::blend(nb.iter().map(|(l, w)| (&prev.params[l], w)))
+                    let nearest = nb.iter().next();
+                    match nearest {
+                        // A record that stayed put keeps its parameters exactly.
+                        Some((l, _)) if nb.closest_distance() == Some(0.0) => prev.params[l],
+                        _ => RecordParams::blend(nb.iter().map(|(l, w)| (&prev.params[l], w))),
+                    }
                 }
                 _ => prior,
             })

@@ -21,6 +21,7 @@ pub mod eval;
 pub mod exhaustive;
 pub mod generate;
 pub mod integrator;
+pub mod seam;
 
 #[cfg(test)]
 mod tests;
@@ -29,6 +30,7 @@ pub use eval::{GeometryBound, Receiver};
 pub use exhaustive::{exhaustive_pixel, render_exhaustive, ExhaustiveImage, SceneVpls};
 pub use generate::{generate_vpls, VplParams};
 pub use integrator::{render_vpl_frame, StageTimes, VplFrame, VplSettings};
+pub use seam::{VplEstimator, VplIntegrator};
 
 use filtrace_core::sampling::Frame;
 use filtrace_core::{Rgb, Vec3};

@@ -19,6 +19,8 @@ pub enum Which {
     Suite(super::bench_suite::Args),
     /// Per-frame update cost and animated-vs-still sampling speed (one object moving).
     Animation(super::bench_animation::Args),
+    /// VPL renderer milliseconds per stage (generation, cache, shading, optimisation).
+    Vpl(super::bench_vpl::Args),
 }
 
 pub fn run(which: Which) -> anyhow::Result<()> {
@@ -30,5 +32,6 @@ pub fn run(which: Which) -> anyhow::Result<()> {
         Which::Adaptive(a) => super::bench_adaptive::run(a),
         Which::Suite(a) => super::bench_suite::run(a),
         Which::Animation(a) => super::bench_animation::run(a),
+        Which::Vpl(a) => super::bench_vpl::run(a),
     }
 }

@@ -23,9 +23,14 @@ pub struct Args {
     pub adaptive: AdaptiveArgs,
     #[command(flatten)]
     pub sequence: SequenceArgs,
+    #[command(flatten)]
+    pub vpl: super::render_vpl::VplArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.vpl.enabled() {
+        return super::render_vpl::run(&args.common, &args.vpl);
+    }
     if args.sequence.is_sequence() {
         return super::sequence::run(&args.common, &args.filter, &args.adaptive, &args.sequence);
     }

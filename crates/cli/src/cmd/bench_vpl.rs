@@ -1,0 +1,125 @@
+//! `filtrace bench vpl [SCENE]`: milliseconds per stage of one VPL frame (VPL generation,
+//! cache placement + evaluation, shading, optimisation) for each sampler, by default the
+//! issue's setting: 512x512, 1 spp, 2048 VPLs, 1024 cache points, all cores.
+
+use super::render::{parse_resolution, Resolution};
+use filtrace_render::{RenderSettings, Renderer};
+use filtrace_vpl::cache::{CacheParams, SamplerKind};
+use filtrace_vpl::vpls::{render_vpl_frame, VplParams, VplSettings};
+use serde::Serialize;
+use std::io::Write;
+use std::sync::atomic::AtomicBool;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Scene: a built-in name or a file.
+    #[arg(default_value = "cornell")]
+    pub scene: String,
+    #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
+    pub res: Resolution,
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    #[arg(long, default_value_t = 2048)]
+    pub vpls: usize,
+    #[arg(long, default_value_t = 1024)]
+    pub cache_points: usize,
+    /// Comma-separated samplers (default: all five).
+    #[arg(long, value_delimiter = ',')]
+    pub samplers: Vec<String>,
+    /// Print one JSON object instead of a markdown table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Serialize)]
+struct Row {
+    sampler: String,
+    vpl_generation_ms: f64,
+    cache_ms: f64,
+    shading_ms: f64,
+    optimisation_ms: f64,
+    total_ms: f64,
+    mean_rgb: [f64; 3],
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let scene = filtrace_scene::load_scene(&args.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let settings = RenderSettings {
+        width: args.res.width,
+        height: args.res.height,
+        spp: args.spp,
+        max_depth: 8,
+        seed: 0,
+    };
+    let renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let samplers: Vec<SamplerKind> = if args.samplers.is_empty() {
+        SamplerKind::ALL.to_vec()
+    } else {
+        args.samplers
+            .iter()
+            .map(|s| s.parse())
+            .collect::<Result<_, _>>()
+            .map_err(|e: String| anyhow::anyhow!(e))?
+    };
+    let cancel = AtomicBool::new(false);
+    let mut rows = Vec::new();
+    for sampler in samplers {
+        let vs = VplSettings {
+            vpls: VplParams::with_count(args.vpls),
+            sampler,
+            cache: CacheParams { cache_points: args.cache_points, ..CacheParams::default() },
+            ground_truth: false,
+        };
+        let frame = render_vpl_frame(&renderer, &vs, args.spp, &cancel)
+            .map_err(|e| anyhow::anyhow!(e))?
+            .ok_or_else(|| anyhow::anyhow!("cancelled"))?;
+        let t = frame.times;
+        let mean = frame.film.aovs().color.mean();
+        rows.push(Row {
+            sampler: sampler.name().into(),
+            vpl_generation_ms: t.vpl_generation_ms,
+            cache_ms: t.cache_ms,
+            shading_ms: t.shading_ms,
+            optimisation_ms: t.optimisation_ms,
+            total_ms: t.vpl_generation_ms + t.cache_ms + t.shading_ms + t.optimisation_ms,
+            mean_rgb: [mean[0], mean[1], mean[2]],
+        });
+    }
+    let mut o = super::output::stdout();
+    if args.json {
+        writeln!(
+            o,
+            "{}",
+            serde_json::json!({ "scene": args.scene, "res": args.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "threads": rayon::current_num_threads(), "rows": rows })
+        )?;
+        return Ok(());
+    }
+    writeln!(
+        o,
+        "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points, {} threads (ms)\n",
+        args.scene,
+        args.res,
+        args.spp,
+        args.vpls,
+        args.cache_points,
+        rayon::current_num_threads()
+    )?;
+    writeln!(
+        o,
+        "| sampler | VPLs | cache | shading | optimisation | total | mean G |\n|---|---|---|---|---|---|---|"
+    )?;
+    for r in &rows {
+        writeln!(
+            o,
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.4} |",
+            r.sampler,
+            r.vpl_generation_ms,
+            r.cache_ms,
+            r.shading_ms,
+            r.optimisation_ms,
+            r.total_ms,
+            r.mean_rgb[1]
+        )?;
+    }
+    Ok(())
+}

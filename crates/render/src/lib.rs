@@ -16,11 +16,13 @@ mod fallible;
 pub mod film;
 pub mod frame;
 pub mod frame_bench;
+mod frame_state;
 pub mod integrator;
 pub mod lights;
 pub mod memory;
 pub mod motion;
 pub mod renderer;
+pub mod settings;
 pub mod surface;
 pub mod texture;
 

@@ -308,7 +308,7 @@ impl ViewerApp {
             crate::overlay::error_box(&painter, rect, &format!("loading {} ...", self.opts.scene));
         }
         if self.overlay {
-            crate::overlay::draw(&painter, rect, self);
+            crate::overlay::draw(&painter, rect, self.shown.as_ref(), &self.stats, self.message.as_deref());
         }
         rect
     }
@@ -334,7 +334,7 @@ impl eframe::App for ViewerApp {
         self.poll_scene();
         self.take_frame(&ctx);
         self.finish_shot(&ctx);
-        egui::Panel::left("settings").exact_size(PANEL_WIDTH).show(ui, |ui| crate::panel::show(ui, self));
+        egui::Panel::left("settings").exact_size(PANEL_WIDTH).show(ui, |ui| self.show_panel(ui));
         let image = egui::CentralPanel::default().show(ui, |ui| self.draw_image(ui)).inner;
         self.last_image = image;
         if let (true, Some(frame)) = (std::mem::take(&mut self.log_pending), &self.shown) {

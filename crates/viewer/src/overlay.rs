@@ -3,8 +3,9 @@
 
 use eframe::egui::{self, Color32, FontId};
 
-use crate::app::ViewerApp;
 use crate::engine::FrameKind;
+use crate::stats::UiStats;
+use crate::worker::Published;
 
 /// A semi-transparent box with `text` at the top left of `rect`.
 fn text_box(painter: &egui::Painter, rect: egui::Rect, text: &str, color: Color32) {
@@ -15,9 +16,15 @@ fn text_box(painter: &egui::Painter, rect: egui::Rect, text: &str, color: Color3
     painter.galley(bg.min + egui::vec2(4.0, 3.0), galley, color);
 }
 
-/// The overlay of `app`'s shown frame.
-pub fn draw(painter: &egui::Painter, rect: egui::Rect, app: &ViewerApp) {
-    let Some(f) = &app.shown else { return };
+/// The overlay of the shown frame `shown`, with the UI's `stats` and a status `message`.
+pub fn draw(
+    painter: &egui::Painter,
+    rect: egui::Rect,
+    shown: Option<&Published>,
+    stats: &UiStats,
+    message: Option<&str>,
+) {
+    let Some(f) = shown else { return };
     let [w, h] = f.image.size;
     let mut lines = vec![match f.kind {
         FrameKind::Still { spp } => {
@@ -27,20 +34,20 @@ pub fn draw(painter: &egui::Painter, rect: egui::Rect, app: &ViewerApp) {
             format!("moving {w}x{h} ({:.0}%)  1 spp  {}", scale * 100.0, f.job.render.filter.name)
         }
     }];
-    lines.push(format!("render {:.1} fps, frame {:.1} ms", app.stats.render_fps(), f.total_ms));
+    lines.push(format!("render {:.1} fps, frame {:.1} ms", stats.render_fps(), f.total_ms));
     lines.push(format!(
         "UI {:.0} fps, {:.1} ms (max {:.1} rendering)",
-        app.stats.ui_fps(),
-        app.stats.last_ui_ms,
-        app.stats.max_busy_frame_ms
+        stats.ui_fps(),
+        stats.last_ui_ms,
+        stats.max_busy_frame_ms
     ));
     let stages: Vec<String> = f.stages.iter().map(|(s, ms)| format!("{s} {ms:.1}")).collect();
     lines.push(format!("{} ms", stages.join("  ")));
     if !f.missing.is_empty() {
         lines.push(format!("not in this frame: {}", f.missing.join(", ")));
     }
-    if let Some(m) = &app.message {
-        lines.push(m.clone());
+    if let Some(m) = message {
+        lines.push(m.to_string());
     }
     text_box(painter, rect, &lines.join("\n"), Color32::WHITE);
 }

@@ -11,7 +11,14 @@ use crate::input::Action;
 use crate::layers::LAYERS;
 use crate::settings::{filter_presets, StillRenderer, FILTERS};
 
-pub fn show(ui: &mut egui::Ui, app: &mut ViewerApp) {
+impl ViewerApp {
+    /// The settings panel; its widgets write into this app's choices.
+    pub(crate) fn show_panel(&mut self, ui: &mut egui::Ui) {
+        show(ui, self)
+    }
+}
+
+fn show(ui: &mut egui::Ui, app: &mut ViewerApp) {
     egui::ScrollArea::vertical().show(ui, |ui| {
         ui.heading("filtrace view");
         ui.label(&app.opts.scene);

@@ -187,7 +187,17 @@ impl Integrator for BsdfOnlyIntegrator {
 }
 
 /// The renderer's built-in choice, dispatched without `dyn` (a closed set).
-impl Integrator for crate::renderer::IntegratorKind {
+/// Which estimator a pass uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum IntegratorKind {
+    /// Next-event estimation + MIS ([`path`]).
+    #[default]
+    Path,
+    /// BSDF sampling only ([`bsdf_only`]), the reference for tests.
+    BsdfOnly,
+}
+
+impl Integrator for IntegratorKind {
     #[inline]
     fn li(
         &self,

@@ -34,6 +34,8 @@ enum Command {
 
 fn main() {
     exit_cleanly_on_println_failure();
+    // The one CPU-feature check of the process: every SIMD path asks `cpu::isa()` after it.
+    filtrace_core::cpu::isa();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => cmd::render::run(a),

@@ -83,13 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         animated_mean_rgb: animated.mean_color,
         still_mean_rgb: still.mean_color,
     };
-    let mut out = super::output::stdout();
-    if args.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
-    } else {
-        print_table(&mut out, &report)?;
-    }
-    Ok(out.flush()?)
+    super::output::print_report(args.json, &report, print_table)
 }
 
 fn print_table(out: &mut impl Write, r: &Report) -> std::io::Result<()> {

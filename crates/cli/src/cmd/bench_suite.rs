@@ -153,13 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ray_threads: args.ray_threads,
         scenes,
     };
-    let mut out = super::output::stdout();
-    if args.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
-    } else {
-        print_tables(&mut out, &report)?;
-    }
-    Ok(out.flush()?)
+    super::output::print_report(args.json, &report, print_tables)
 }
 
 /// The scene `name` of [`SUITE`], or any scene `bench rays` accepts.

@@ -67,3 +67,18 @@ pub fn exit_on_stdout_failure(e: &io::Error) -> ! {
     eprintln!("error: cannot write to standard output: {e}");
     std::process::exit(1);
 }
+
+/// Prints a benchmark's `report`: pretty JSON with `--json`, else the markdown `table`.
+pub fn print_report<R: serde::Serialize>(
+    json: bool,
+    report: &R,
+    table: impl FnOnce(&mut Stdout, &R) -> io::Result<()>,
+) -> anyhow::Result<()> {
+    let mut out = stdout();
+    if json {
+        writeln!(out, "{}", serde_json::to_string_pretty(report)?)?;
+    } else {
+        table(&mut out, report)?;
+    }
+    Ok(out.flush()?)
+}

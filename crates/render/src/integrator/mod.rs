@@ -186,8 +186,8 @@ impl Integrator for BsdfOnlyIntegrator {
     }
 }
 
-/// The renderer's built-in choice, dispatched without `dyn` (a closed set).
-/// Which estimator a pass uses.
+/// Which estimator a pass uses: the renderer's built-in choice, dispatched without `dyn`
+/// (a closed set).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum IntegratorKind {
     /// Next-event estimation + MIS ([`path`]).

@@ -3,7 +3,6 @@
 //! scene dump for the peer scripts is complete, and bad input is an error. Timings are never
 //! checked.
 
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn suite(args: &[&str]) -> Output {
@@ -19,20 +18,9 @@ fn json_of(o: &Output) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).expect("bench suite --json prints one JSON object")
 }
 
-/// `../shared/<rel>` from the project root; `None` when absent, a failure under CI.
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(rel);
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} not found (../shared is required when CI is set)",
-        p.display()
-    );
-    println!("SKIPPED: {} not found", p.display());
-    None
-}
+#[path = "support/shared.rs"]
+mod support_shared;
+use support_shared::shared;
 
 #[test]
 fn suite_json_has_render_and_ray_rows_and_the_same_image_at_every_thread_count() {

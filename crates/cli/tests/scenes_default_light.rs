@@ -5,20 +5,9 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-/// `../shared/<rel>` from the project root; `None` when absent, a failure under CI.
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(rel);
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} not found (../shared is required when CI is set)",
-        p.display()
-    );
-    println!("SKIPPED: {} not found", p.display());
-    None
-}
+#[path = "support/shared.rs"]
+mod support_shared;
+use support_shared::shared;
 
 /// Renders `scene` at 24x24, 2 spp with `extra` flags; returns the JSON summary.
 fn render_json(scene: &PathBuf, tag: &str, extra: &[&str]) -> serde_json::Value {

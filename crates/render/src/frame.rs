@@ -98,11 +98,18 @@ impl Renderer {
     pub fn set_resolution(&mut self, width: u32, height: u32) -> Result<(), FrameError> {
         let settings = crate::RenderSettings { width, height, ..self.settings.clone() };
         settings.validate().map_err(FrameError::Resolution)?;
+        self.apply_size(settings);
+        Ok(())
+    }
+
+    /// Takes `settings` (validated) with their image size: the camera and the previous
+    /// frame's camera follow it.
+    pub(crate) fn apply_size(&mut self, settings: crate::RenderSettings) {
+        let (width, height) = (settings.width, settings.height);
         self.settings = settings;
         (self.frame.desc.width, self.frame.desc.height) = (width, height);
         self.camera = PinholeCamera::new(&self.frame.desc.camera, width, height);
         self.frame.prev_camera = self.frame.prev_camera.resized(width, height);
-        Ok(())
     }
 
     /// The current state becomes the previous frame's.

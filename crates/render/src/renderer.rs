@@ -127,15 +127,7 @@ impl Renderer {
         settings: RenderSettings,
     ) -> Result<(), RenderError> {
         settings.validate()?;
-        let (width, height) = (settings.width, settings.height);
-        self.settings =
-            RenderSettings { width: self.settings.width, height: self.settings.height, ..settings };
-        if (width, height) != (self.settings.width, self.settings.height) {
-            match self.set_resolution(width, height) {
-                Err(crate::frame_state::FrameError::Resolution(e)) => return Err(e),
-                r => r.expect("set_resolution fails only on a resolution"),
-            }
-        }
+        self.apply_size(settings);
         self.set_camera(cam);
         Ok(())
     }

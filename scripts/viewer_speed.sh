@@ -2,7 +2,9 @@
 # Speed of `filtrace view` while the camera moves, in a real window under Xvfb:
 # a mouse drag held for SECONDS while the viewer renders the 1-spp filtered frames, then
 # Escape; prints the viewer's summary line (moving frames, their mean render time and
-# pixel count, and the longest UI-thread frame while a render ran).
+# pixel count, and the longest UI-thread frame while a render ran) and, from the
+# --log-frames lines, the mean milliseconds of each stage of the moving frames at the
+# full resolution and the rate at which moving frames were shown (wall clock).
 #
 #   scripts/viewer_speed.sh [FILTRACE_BINARY] [SCENE] [RES] [TARGET_FPS] [SECONDS]
 #
@@ -37,4 +39,24 @@ done
 xdotool mouseup 1 windowfocus --sync "$win" key Escape
 wait $viewer
 grep "closed;" "$log"
+# Per-stage means over the moving frames at full resolution (--log-frames lines carry
+# `kind=moving scale=S size=WxH layer=L ms=T stage=ms ...`), and the shown rate from the
+# stderr timestamps the viewer does not print: frames over the drag's seconds.
+awk -v res="$res" -v secs="$seconds" '
+/kind=moving/ {
+    moving++
+    if (index($0, "size=" res " ") == 0) next
+    full++
+    for (i = 1; i <= NF; i++) {
+        split($i, kv, "=")
+        if (kv[1] ~ /^(kind|scale|size|layer|image|camera|anim_frame)$/ || kv[2] == "") continue
+        if (!(kv[1] in sum)) order[++n] = kv[1]
+        sum[kv[1]] += kv[2]
+    }
+}
+END {
+    printf "moving frames: %d (%.1f per second of drag), %d at %s; mean ms per stage at %s:", moving, moving / secs, full, res, res
+    for (i = 1; i <= n; i++) printf " %s %.1f", order[i], sum[order[i]] / (full ? full : 1)
+    printf "\n"
+}' "$log"
 rm -f "$log"

@@ -453,3 +453,93 @@ fn a_reload_with_a_broken_file_keeps_the_last_good_scene() {
     x.key(&w, "Escape");
     assert_eq!(v.wait_exit(), 0, "{}", v.stderr());
 }
+
+/// The PNG (or EXR) `filtrace render --frame N --out dir/name.exr` writes for frame `n`.
+fn frame_file(dir: &Path, name: &str, n: u32, ext: &str) -> PathBuf {
+    dir.join(format!("{name}.{n:04}.{ext}"))
+}
+
+#[test]
+fn a_frame_of_an_animation_equals_the_render_of_that_frame() {
+    let Some(x) = Xvfb::start("a_frame_of_an_animation_equals_the_render_of_that_frame") else { return };
+    let dir = temp_dir("anim-frame");
+    let shot = dir.join("shot.png");
+    let mut v = Viewer::start(
+        &x,
+        &[
+            &["cornell-anim", "--frame", "5", "--frames", "2", "--spp-per-frame", "2", "--no-overlay"],
+            &["--screenshot", shot.to_str().unwrap()][..],
+            TINY,
+        ]
+        .concat(),
+    );
+    assert_eq!(v.wait_exit(), 0, "{}", v.stderr());
+    render("cornell-anim", &dir, "ref", &[&["--frame", "5", "--spp", "4"], TINY].concat());
+    let (a, b) = (rgb(&shot), rgb(&frame_file(&dir, "ref", 5, "png")));
+    assert!(max_diff(&a, &b) <= 1, "screenshot differs from frame 5's render by {}", max_diff(&a, &b));
+    // Frame 5 is not frame 0: the animation moved the camera and the light.
+    render("cornell-anim", &dir, "first", &[&["--frame", "0", "--spp", "4"], TINY].concat());
+    assert!(max_diff(&a, &rgb(&frame_file(&dir, "first", 0, "png"))) > 10, "frame 5 looks like frame 0");
+}
+
+#[test]
+fn arrow_keys_step_the_animation_space_plays_it_and_the_motion_layer_shows_the_step() {
+    let Some(x) = Xvfb::start("arrow_keys_step_the_animation_space_plays_it") else { return };
+    let dir = temp_dir("anim-keys");
+    let args = [
+        &["cornell-anim", "--frame", "3", "--spp-per-frame", "1", "--max-spp", "1", "--log-frames"][..],
+        &["--no-overlay", "--out-dir", dir.to_str().unwrap()],
+        TINY,
+    ]
+    .concat();
+    let mut v = Viewer::start(&x, &args);
+    let still_at =
+        |n: i64| move |l: &str| l.contains("kind=still") && l.contains(&format!("anim_frame={n} "));
+    let (seen, _) = v.wait_line(0, "a still frame of frame 3", still_at(3));
+    let w = v.window(&x);
+    x.key(&w, "Right");
+    let (seen, _) = v.wait_line(seen, "a still frame of frame 4", still_at(4));
+    // Key 0: the motion layer, which after the step points from frame 4 back to frame 3.
+    x.key(&w, "0");
+    let (seen, _) = v.wait_line(seen, "the motion layer", |l| l.contains("layer=motion anim_frame=4 "));
+    x.key(&w, "F12");
+    let (seen, saved) = v.wait_line(seen, "the screenshot", |l| l.contains("saved screenshot"));
+    // Space: playback, filtered frames of later frames.
+    x.key(&w, "space");
+    v.wait_line(seen, "a moving frame of a later frame", |l| {
+        l.contains("kind=moving") && !l.contains("anim_frame=4 ") && !l.contains("anim_frame=3 ")
+    });
+    x.key(&w, "Escape");
+    assert_eq!(v.wait_exit(), 0, "{}", v.stderr());
+    let shot = rgb(Path::new(saved.rsplit("saved screenshot ").next().unwrap()));
+    render("cornell-anim", &dir, "ref", &[&["--frame", "4", "--spp", "1"], TINY].concat());
+    let exr = filtrace_io::read_exr(frame_file(&dir, "ref", 4, "exr")).unwrap();
+    let motion = exr.layer(&["motion"]).unwrap();
+    assert!(motion.data().iter().any(|m| m.abs() > 0.01), "the camera moves between frames 3 and 4");
+    let tonemap = filtrace_io::TonemapParams::srgb_clamp();
+    let want = filtrace_viewer::layers::to_rgb8(&motion, filtrace_viewer::layers::Display::Motion, &tonemap);
+    let want = image::RgbImage::from_raw(48, 40, want).unwrap();
+    assert!(max_diff(&shot, &want) <= 1, "motion layer differs by {}", max_diff(&shot, &want));
+}
+
+#[test]
+fn the_many_light_renderer_shows_the_vpl_render() {
+    let Some(x) = Xvfb::start("the_many_light_renderer_shows_the_vpl_render") else { return };
+    let dir = temp_dir("vpl");
+    let shot = dir.join("shot.png");
+    let mut v = Viewer::start(
+        &x,
+        &[
+            &["cornell", "--integrator", "vpl", "--frames", "1", "--spp-per-frame", "2", "--no-overlay"],
+            &["--screenshot", shot.to_str().unwrap()][..],
+            TINY,
+        ]
+        .concat(),
+    );
+    assert_eq!(v.wait_exit(), 0, "{}", v.stderr());
+    let png = render("cornell", &dir, "ref", &[&["--integrator", "vpl", "--spp", "2"], TINY].concat())
+        .with_extension("png");
+    let (a, b) = (rgb(&shot), rgb(&png));
+    assert!(max_diff(&a, &b) <= 1, "screenshot differs from the VPL render by {}", max_diff(&a, &b));
+    assert!(a.as_raw().iter().any(|&c| c > 30), "a black screenshot");
+}

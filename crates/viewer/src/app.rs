@@ -14,6 +14,7 @@ use crate::layers::LAYERS;
 use crate::scene_watch::{SceneEvent, SceneWatch};
 use crate::settings::{DisplayChoice, RenderChoice};
 use crate::stats::UiStats;
+use crate::timeline::Timeline;
 use crate::worker::{Job, Published, Worker};
 use crate::{save, ViewerOptions, ViewerOutcome};
 
@@ -41,8 +42,10 @@ pub struct ViewerApp {
     pub(crate) home: Option<Camera>,
     pub(crate) render: RenderChoice,
     pub(crate) display: DisplayChoice,
+    /// The animated scene's timeline (`None` for a still scene).
+    pub(crate) timeline: Option<Timeline>,
     navigator: Navigator,
-    last_change: Option<Instant>,
+    pub(crate) last_change: Option<Instant>,
     texture: Option<egui::TextureHandle>,
     pub(crate) shown: Option<Published>,
     pub(crate) scene_error: Option<String>,
@@ -76,6 +79,7 @@ impl ViewerApp {
         render.filter = opts.filter.clone();
         render.adaptive = opts.adaptive;
         render.target_fps = opts.target_fps;
+        render.still = opts.still;
         let display = DisplayChoice { layer: opts.layer, ..DisplayChoice::default() };
         Ok(Self {
             camera: opts.camera.clone().unwrap_or_else(filtrace_scene::Camera::cornell),
@@ -86,6 +90,7 @@ impl ViewerApp {
             scene,
             render,
             display,
+            timeline: None,
             navigator: Navigator::default(),
             last_change: None,
             texture: None,
@@ -105,6 +110,31 @@ impl ViewerApp {
     fn poll_scene(&mut self) {
         match self.scene.poll() {
             Some(SceneEvent::Loaded(scene)) => {
+                // A reload keeps the shown frame where the animation still has it.
+                let start = self.timeline.as_ref().map(|t| t.frame()).or(self.opts.frame);
+                let timeline = match Timeline::new(&scene, start).or_else(|e| {
+                    if self.home.is_some() {
+                        Timeline::new(&scene, None)
+                    } else {
+                        Err(e)
+                    }
+                }) {
+                    Ok(t) => t,
+                    Err(e) => {
+                        eprintln!("filtrace view: {e}");
+                        self.scene_error = Some(e);
+                        return;
+                    }
+                };
+                let first_load = self.home.is_none();
+                let follow = self.timeline.as_ref().is_none_or(|t| t.follow_camera);
+                self.timeline = timeline.map(|mut t| {
+                    t.follow_camera &= follow && !(first_load && self.opts.camera.is_some());
+                    if first_load && self.opts.play {
+                        t.toggle_play(Instant::now());
+                    }
+                    t
+                });
                 let file_cam = Engine::scene_camera(&scene);
                 // The first scene, or a reload that moved the file's camera, sets the camera
                 // (unless --camera chose one); otherwise the user's camera stays.
@@ -134,11 +164,43 @@ impl ViewerApp {
         let nav = self.navigator.update(ctx, image, &self.camera, self.render.height as f32);
         if nav.camera != self.camera || nav.active {
             self.last_change = Some(Instant::now());
+            // The user's hand takes the camera from the animation's track (R gives it back).
+            if let Some(t) = &mut self.timeline {
+                t.follow_camera = false;
+            }
         }
         self.camera = nav.camera;
         for action in nav.actions {
             self.act(ctx, action, image);
         }
+    }
+
+    /// Playback, and the animated camera when the camera follows the track. A change of
+    /// frame counts as movement: the filtered path until the frame stays.
+    fn animate(&mut self, ctx: &egui::Context) {
+        let Some(t) = &mut self.timeline else { return };
+        if t.tick(Instant::now()) {
+            self.last_change = Some(Instant::now());
+        }
+        if t.playing() {
+            ctx.request_repaint_after(Duration::from_secs_f64(t.frame_seconds()));
+        }
+        if t.follow_camera {
+            if let Some(cam) = t.animated_camera() {
+                self.camera = cam;
+            }
+        }
+    }
+
+    /// Animation actions (keys and panel buttons).
+    pub(crate) fn timeline_action(&mut self, action: Action) {
+        let Some(t) = &mut self.timeline else { return };
+        match action {
+            Action::TogglePlay => t.toggle_play(Instant::now()),
+            Action::StepFrame(d) => t.step(d),
+            _ => return,
+        }
+        self.last_change = Some(Instant::now());
     }
 
     pub(crate) fn act(&mut self, ctx: &egui::Context, action: Action, image: egui::Rect) {
@@ -151,11 +213,16 @@ impl ViewerApp {
                         .with_extension("png");
                 self.request_shot(ctx, path, image, false);
             }
-            Action::ResetCamera => {
-                if let Some(home) = &self.home {
-                    self.camera = home.clone();
+            Action::ResetCamera => match &mut self.timeline {
+                // Back to the animation's camera, which the view follows again.
+                Some(t) if t.has_camera_track() => t.follow_camera = true,
+                _ => {
+                    if let Some(home) = &self.home {
+                        self.camera = home.clone();
+                    }
                 }
-            }
+            },
+            Action::TogglePlay | Action::StepFrame(_) => self.timeline_action(action),
             Action::ToggleSplit => self.display.split = !self.display.split,
             Action::ToggleOverlay => self.overlay = !self.overlay,
             Action::Layer(n) => {
@@ -250,8 +317,12 @@ impl ViewerApp {
             return;
         }
         let want = frames.saturating_mul(self.render.spp_per_frame);
+        let want = want.min(crate::engine::still_limit(&self.render));
         let done = self.shown.as_ref().is_some_and(|s| {
-            s.kind == FrameKind::Still { spp: want } && s.job.camera == self.camera && !self.moving()
+            s.kind == FrameKind::Still { spp: want }
+                && s.job.camera == self.camera
+                && s.job.frame == self.frame()
+                && !self.moving()
         });
         let render_error = self.worker.error();
         if let Some(e) = &render_error {
@@ -267,18 +338,28 @@ impl ViewerApp {
         }
     }
 
+    /// The camera or the scene is moving: a drag, a fly key, a recent change, or playback.
     pub(crate) fn moving(&self) -> bool {
         self.last_change.is_some_and(|t| t.elapsed() < SETTLE)
+            || self.timeline.as_ref().is_some_and(|t| t.playing())
+    }
+
+    /// The animation frame shown (0 for a still scene).
+    pub(crate) fn frame(&self) -> i64 {
+        self.timeline.as_ref().map_or(0, |t| t.frame())
     }
 
     /// Takes the worker's newest frame into the texture.
     fn take_frame(&mut self, ctx: &egui::Context) {
         let Some(frame) = self.worker.take() else { return };
         let full = [self.render.width as usize, self.render.height as usize];
+        // One texel per screen pixel at full size; a smaller moving frame is stretched.
+        // No mipmaps (TextureOptions' default): the image is never minified.
         let options = if frame.image.size == full { TextureOptions::NEAREST } else { TextureOptions::LINEAR };
+        let image = egui::ImageData::Color(frame.image.clone());
         match &mut self.texture {
-            Some(t) => t.set(frame.image.clone(), options),
-            None => self.texture = Some(ctx.load_texture("frame", frame.image.clone(), options)),
+            Some(t) => t.set(image, options),
+            None => self.texture = Some(ctx.load_texture("frame", image, options)),
         }
         self.stats.frame_published(&frame);
         self.log_pending = self.opts.log_frames;
@@ -308,7 +389,15 @@ impl ViewerApp {
             crate::overlay::error_box(&painter, rect, &format!("loading {} ...", self.opts.scene));
         }
         if self.overlay {
-            crate::overlay::draw(&painter, rect, self.shown.as_ref(), &self.stats, self.message.as_deref());
+            let animated = self.timeline.is_some();
+            crate::overlay::draw(
+                &painter,
+                rect,
+                self.shown.as_ref(),
+                animated,
+                &self.stats,
+                self.message.as_deref(),
+            );
         }
         rect
     }
@@ -319,6 +408,7 @@ impl ViewerApp {
         }
         let job = Job {
             camera: self.camera.clone(),
+            frame: self.frame(),
             render: self.render.clone(),
             display: self.display.clone(),
             moving: self.moving(),
@@ -342,6 +432,7 @@ impl eframe::App for ViewerApp {
             eprintln!("filtrace view: frame {}", crate::stats::describe(frame, (at.x, at.y)));
         }
         self.handle_input(&ctx, image);
+        self.animate(&ctx);
         self.post_job();
         self.headless(&ctx, image);
         if self.moving() {
@@ -353,6 +444,9 @@ impl eframe::App for ViewerApp {
         let mut out = self.outcome.lock().unwrap_or_else(|p| p.into_inner());
         out.camera = Some(self.camera.clone());
         out.max_ui_frame_ms = self.stats.max_busy_frame_ms;
+        out.mean_ui_frame_ms = self.stats.mean_busy_frame_ms();
+        out.moving_stages = self.stats.moving_stage_means();
+        out.moving_shown_fps = self.stats.moving_shown_fps();
         out.ui_frames_while_rendering = self.stats.busy_frames;
         (out.moving_frames, out.moving_mean_ms, out.moving_mean_pixels) = self.stats.moving_summary();
         out.load_error = if self.home.is_none() { self.scene_error.clone() } else { None };

@@ -6,7 +6,13 @@
 //!   worker scales to keep the frame rate;
 //! - **still** ([`Engine::still_frame`]): progressive path tracing at full resolution, each
 //!   frame adding `spp_per_frame` samples to one film. Samples are added in index order per
-//!   pixel, so after `n` samples the film is bit for bit `filtrace render --spp n`'s.
+//!   pixel, so after `n` samples the film is bit for bit `filtrace render --spp n`'s. Or
+//!   the many-light (VPL) renderer: one frame of `spp_per_frame` samples, as
+//!   `filtrace render --integrator vpl`.
+//!
+//! Every frame is of one frame of the scene's animation ([`Engine::place`]): the renderer's
+//! per-frame update ([`Renderer::set_pose`]) moves what moved since the frame before, so
+//! the `motion` layer points to where each surface was in the view rendered before.
 
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -17,6 +23,7 @@ use filtrace_core::Image;
 use filtrace_pipeline::{FilterChoice, FilteredRenderer, IndirectFilter, PipelineSettings, RenderSource};
 use filtrace_render::{Film, RenderSettings, Renderer};
 use filtrace_scene::{Camera, Scene};
+use filtrace_vpl::vpls::{render_vpl_frame, VplParams, VplSettings};
 
 use crate::layers::LayerSet;
 use crate::settings::{RenderChoice, StillRenderer};
@@ -47,6 +54,7 @@ pub struct FrameOut {
 #[derive(Clone, Debug, PartialEq)]
 struct StillKey {
     camera: Camera,
+    frame: i64,
     width: u32,
     height: u32,
     max_depth: i32,
@@ -56,9 +64,10 @@ struct StillKey {
 }
 
 impl StillKey {
-    fn new(camera: &Camera, c: &RenderChoice) -> Self {
+    fn new(camera: &Camera, frame: i64, c: &RenderChoice) -> Self {
         Self {
             camera: camera.clone(),
+            frame,
             width: c.width,
             height: c.height,
             max_depth: c.max_depth,
@@ -76,6 +85,10 @@ struct Accumulation {
     spp: u32,
     /// Importance map of the film's G-buffer (adaptive on), computed once per key.
     importance: Option<Image>,
+    /// Motion of the view (to the one rendered before), computed once per key.
+    motion: Option<Image>,
+    /// The VPL renderer's distance to the closest cache point.
+    cache_distance: Option<Image>,
 }
 
 /// One scene ready to render (see the module docs).
@@ -84,6 +97,8 @@ pub struct Engine {
     filter: FilterChoice,
     scene_scale: f32,
     still: Option<Accumulation>,
+    /// The animation frame the renderer was last posed at (`None`: the rest pose).
+    placed: Option<i64>,
 }
 
 impl Engine {
@@ -96,7 +111,7 @@ impl Engine {
         let filter = choice.filter.build(Some(scene_scale))?;
         let ps = pipeline_settings(choice, choice.width, choice.height);
         let pipeline = FilteredRenderer::new(source, filter, ps).map_err(|e| e.to_string())?;
-        Ok(Self { pipeline, filter: choice.filter.clone(), scene_scale, still: None })
+        Ok(Self { pipeline, filter: choice.filter.clone(), scene_scale, still: None, placed: None })
     }
 
     /// The camera the scene file gives (or the framing of its bounds).
@@ -104,28 +119,59 @@ impl Engine {
         scene.camera.clone().unwrap_or_else(|| filtrace_scene::default_camera_for(scene.bounds()))
     }
 
-    /// Samples per pixel the still film holds for this camera and choice (0 if another).
-    pub fn still_spp(&self, camera: &Camera, choice: &RenderChoice) -> u32 {
+    /// Samples per pixel the still film holds for this view and choice (0 if another).
+    pub fn still_spp(&self, camera: &Camera, frame: i64, choice: &RenderChoice) -> u32 {
         match &self.still {
-            Some(a) if a.key == StillKey::new(camera, choice) => a.spp,
+            Some(a) if a.key == StillKey::new(camera, frame, choice) => a.spp,
             _ => 0,
         }
     }
 
-    /// A moving frame at `width x height` (see the module docs).
+    /// True when the still image of this view is finished (nothing left to render).
+    pub fn still_done(&self, camera: &Camera, frame: i64, choice: &RenderChoice) -> bool {
+        self.still_spp(camera, frame, choice) >= still_limit(choice)
+    }
+
+    /// Brings the renderer to `camera` at frame `frame` of the scene's animation (any frame
+    /// of a still scene) with settings `rs`. When the camera or the frame changed this is
+    /// one update of the renderer ([`Renderer::set_pose`] with the pose's camera replaced
+    /// by `camera`): the state before becomes its previous frame, which the motion layer
+    /// points into. A change of resolution alone keeps the frame (moving and still frames
+    /// differ in size); a change of depth or seed starts the view again.
+    pub fn place(&mut self, camera: &Camera, frame: i64, rs: RenderSettings) -> Result<(), String> {
+        let r = self.pipeline.source_mut().renderer_mut();
+        let (w, h) = (r.settings().width, r.settings().height);
+        if (RenderSettings { width: w, height: h, ..rs.clone() }) != *r.settings() {
+            let current = r.frame().camera.clone();
+            r.set_view(&current, rs).map_err(|e| e.to_string())?;
+        } else if (rs.width, rs.height) != (w, h) {
+            r.set_resolution(rs.width, rs.height).map_err(|e| e.to_string())?;
+        }
+        if self.placed != Some(frame) || r.frame().camera != *camera {
+            let mut pose = r.scene().pose_at_frame(frame).map_err(|e| e.to_string())?;
+            pose.camera = Some(camera.clone());
+            r.set_pose(&pose).map_err(|e| e.to_string())?;
+            self.placed = Some(frame);
+        }
+        Ok(())
+    }
+
+    /// A moving frame at `width x height` (see the module docs) holding the layers named
+    /// in `shown` (the motion layer costs a primary ray per pixel, so it is made only then).
     pub fn moving_frame(
         &mut self,
-        camera: &Camera,
+        view: (&Camera, i64),
         choice: &RenderChoice,
         (width, height): (u32, u32),
+        shown: &[&str],
     ) -> Result<FrameOut, String> {
         let start = Instant::now();
         if self.filter != choice.filter {
             self.pipeline.set_filter(choice.filter.build(Some(self.scene_scale))?);
             self.filter = choice.filter.clone();
         }
-        let rs = render_settings(choice, width, height);
-        self.pipeline.source_mut().renderer_mut().set_view(camera, rs).map_err(|e| e.to_string())?;
+        self.place(view.0, view.1, render_settings(choice, width, height))?;
+        let place_ms = ms(start);
         self.pipeline.set_settings(pipeline_settings(choice, width, height)).map_err(|e| e.to_string())?;
         let (frame, plan) = if choice.adaptive {
             let (frame, plan) =
@@ -134,24 +180,34 @@ impl Engine {
         } else {
             (self.pipeline.render_frame().map_err(|e| e.to_string())?, None)
         };
+        // Only the layers shown are copied out of the pipeline's buffers (a 512x512 layer
+        // is 3 MB; a moving frame has eight); the others are named for the selector.
+        let t_layers = Instant::now();
         let im = &frame.images;
+        let keep = |name: &str| shown.contains(&name);
         let mut layers = LayerSet::new(width as usize, height as usize);
-        layers.insert("colour", im.color.clone());
-        layers.insert("noisy", im.noisy.clone());
-        layers.insert("direct", im.direct.clone());
+        layers.offer("colour", &keep, || im.color.clone());
+        layers.offer("noisy", &keep, || im.noisy.clone());
+        layers.offer("direct", &keep, || im.direct.clone());
         // The indirect light the colour holds: filtered.
-        layers.insert("indirect", im.filtered_indirect.clone());
-        layers.insert("albedo", im.guide.albedo.clone());
-        layers.insert("normal", im.guide.normal.clone());
-        layers.insert("depth", im.guide.depth.clone());
-        layers.insert("position", im.guide.position.clone());
-        let mut stages = Vec::new();
+        layers.offer("indirect", &keep, || im.filtered_indirect.clone());
+        layers.offer("albedo", &keep, || im.guide.albedo.clone());
+        layers.offer("normal", &keep, || im.guide.normal.clone());
+        layers.offer("depth", &keep, || im.guide.depth.clone());
+        layers.offer("position", &keep, || im.guide.position.clone());
+        let mut stages = vec![("place", place_ms)];
+        stages.extend(frame.timings.stages());
         if let Some(plan) = plan {
             stages.push(("prepass", plan.prepass_ms));
             stages.push(("plan", plan.plan_ms));
-            layers.insert("importance", plan.importance);
+            layers.offer("importance", &keep, || plan.importance);
         }
-        stages.extend(frame.timings.stages());
+        stages.push(("layers", ms(t_layers)));
+        let t = Instant::now();
+        layers.offer("motion", &keep, || self.pipeline.source().renderer().motion_aov().motion);
+        if keep("motion") {
+            stages.push(("motion", ms(t)));
+        }
         let scale = width as f32 / choice.width as f32;
         Ok(FrameOut {
             layers: Arc::new(layers),
@@ -161,39 +217,45 @@ impl Engine {
         })
     }
 
-    /// Adds `choice.spp_per_frame` samples to the still film (started again when the camera
-    /// or a setting changed). `None` when the film is at `choice.max_spp` or `cancel` cut
-    /// the pass short (the film then starts again next time: its pixels would differ in
-    /// sample count).
+    /// Adds `choice.spp_per_frame` samples to the still film (started again when the camera,
+    /// the frame or a setting changed). `None` when the film is at `choice.max_spp` or
+    /// `cancel` cut the pass short (the film then starts again next time: its pixels would
+    /// differ in sample count). The VPL renderer renders its one frame, then is done.
     pub fn still_frame(
         &mut self,
-        camera: &Camera,
+        (camera, frame): (&Camera, i64),
         choice: &RenderChoice,
         cancel: &AtomicBool,
     ) -> Result<Option<FrameOut>, String> {
         let start = Instant::now();
-        let key = StillKey::new(camera, choice);
-        let renderer = self.pipeline.source_mut().renderer_mut();
-        renderer
-            .set_view(camera, render_settings(choice, choice.width, choice.height))
-            .map_err(|e| e.to_string())?;
+        let key = StillKey::new(camera, frame, choice);
+        self.place(camera, frame, render_settings(choice, choice.width, choice.height))?;
+        let renderer = self.pipeline.source().renderer();
         let mut acc = match self.still.take() {
             Some(a) if a.key == key => a,
-            _ => Accumulation { key, film: renderer.new_film(), spp: 0, importance: None },
+            // A new film: its motion is that of this view against the one rendered before.
+            _ => Accumulation {
+                key,
+                film: renderer.new_film(),
+                spp: 0,
+                importance: None,
+                motion: Some(renderer.motion_aov().motion),
+                cache_distance: None,
+            },
         };
-        if acc.spp >= choice.max_spp {
+        let limit = still_limit(choice);
+        if acc.spp >= limit {
             self.still = Some(acc);
             return Ok(None);
         }
-        let count = choice.spp_per_frame.max(1).min(choice.max_spp - acc.spp);
+        let count = choice.spp_per_frame.max(1).min(limit - acc.spp);
         let t0 = Instant::now();
-        let renderer = self.pipeline.source().renderer();
-        match choice.still {
-            StillRenderer::PathTracer => {
-                if !renderer.render_pass(&mut acc.film, acc.spp, count, cancel) {
-                    return Ok(None);
-                }
-            }
+        let done = match choice.still {
+            StillRenderer::PathTracer => renderer.render_pass(&mut acc.film, acc.spp, count, cancel),
+            StillRenderer::Vpl => vpl_pass(renderer, &mut acc, count, cancel)?,
+        };
+        if !done {
+            return Ok(None);
         }
         let trace_ms = ms(t0);
         acc.spp += count;
@@ -211,6 +273,34 @@ impl Engine {
     }
 }
 
+/// Samples per pixel at which the still image is finished: the path tracer accumulates to
+/// `max_spp`; the VPL renderer renders one frame.
+pub(crate) fn still_limit(choice: &RenderChoice) -> u32 {
+    match choice.still {
+        StillRenderer::PathTracer => choice.max_spp,
+        StillRenderer::Vpl => choice.spp_per_frame.max(1).min(choice.max_spp),
+    }
+}
+
+/// The VPL renderer's frame of `count` samples into `acc` (`filtrace render --integrator
+/// vpl`'s defaults: 2048 VPLs, 2048 cache points, the optimised sampler); false when
+/// cancelled.
+fn vpl_pass(
+    renderer: &Renderer,
+    acc: &mut Accumulation,
+    count: u32,
+    cancel: &AtomicBool,
+) -> Result<bool, String> {
+    let settings = VplSettings {
+        vpls: VplParams { seed: renderer.settings().seed, ..VplParams::with_count(2048) },
+        ..VplSettings::default()
+    };
+    let Some(frame) = render_vpl_frame(renderer, &settings, count, cancel)? else { return Ok(false) };
+    acc.film = frame.film;
+    acc.cache_distance = Some(frame.cache_distance);
+    Ok(true)
+}
+
 /// The film's AOVs as layers, with the importance map when adaptive sampling is on.
 fn still_layers(acc: &mut Accumulation, adaptive: bool) -> Result<LayerSet, String> {
     let aovs = acc.film.try_aovs().map_err(|e| e.to_string())?;
@@ -223,6 +313,12 @@ fn still_layers(acc: &mut Accumulation, adaptive: bool) -> Result<LayerSet, Stri
     let mut layers = LayerSet::new(aovs.width, aovs.height);
     if let Some(map) = &acc.importance {
         layers.insert("importance", map.clone());
+    }
+    if let Some(m) = &acc.motion {
+        layers.insert("motion", m.clone());
+    }
+    if let Some(d) = &acc.cache_distance {
+        layers.insert("cache_distance", d.clone());
     }
     layers.insert("colour", aovs.color);
     layers.insert("direct", aovs.direct);
@@ -269,11 +365,11 @@ mod tests {
         let mut engine = Engine::new(scene.clone(), &c).unwrap();
         let never = AtomicBool::new(false);
         // A moving frame in between changes the renderer's view; the film must not care.
-        engine.still_frame(&cam, &c, &never).unwrap().unwrap();
-        engine.moving_frame(&cam, &c, (8, 6)).unwrap();
-        let out = engine.still_frame(&cam, &c, &never).unwrap().unwrap();
+        engine.still_frame((&cam, 0), &c, &never).unwrap().unwrap();
+        engine.moving_frame((&cam, 0), &c, (8, 6), &["motion"]).unwrap();
+        let out = engine.still_frame((&cam, 0), &c, &never).unwrap().unwrap();
         assert_eq!(out.kind, FrameKind::Still { spp: 4 });
-        assert!(engine.still_frame(&cam, &c, &never).unwrap().is_none(), "max_spp reached");
+        assert!(engine.still_frame((&cam, 0), &c, &never).unwrap().is_none(), "max_spp reached");
 
         let settings = RenderSettings { width: 16, height: 12, spp: 4, max_depth: 4, seed: 0 };
         let want = Renderer::new(scene, settings).unwrap().render(&never).aovs();
@@ -290,13 +386,24 @@ mod tests {
             let c =
                 RenderChoice { filter: FilterChoice::named(name), adaptive: *name == "guided", ..choice() };
             let mut engine = Engine::new(scene.clone(), &c).unwrap();
-            let out = engine.moving_frame(&cam, &c, (10, 8)).unwrap();
+            let all = ["colour", "noisy", "direct", "indirect", "albedo", "normal", "depth", "position"];
+            let out = engine.moving_frame((&cam, 0), &c, (10, 8), &all).unwrap();
             assert_eq!((out.layers.width, out.layers.height), (10, 8));
             assert_eq!(out.kind, FrameKind::Moving { scale: 10.0 / 16.0 });
-            for l in ["colour", "noisy", "direct", "indirect", "albedo", "normal", "depth", "position"] {
+            for l in all {
                 assert!(out.layers.has(l), "{name}: {l}");
             }
-            assert_eq!(out.layers.has("importance"), c.adaptive, "{name}");
+            assert_eq!(out.layers.available().any(|l| l == "importance"), c.adaptive, "{name}");
+            // Only the layers shown are copied; the others are offered by name.
+            let out = engine.moving_frame((&cam, 0), &c, (10, 8), &["normal"]).unwrap();
+            assert!(out.layers.has("normal") && !out.layers.has("colour"));
+            let mut names: Vec<_> = out.layers.available().collect();
+            names.sort_unstable();
+            let mut want = all.to_vec();
+            want.extend(c.adaptive.then_some("importance"));
+            want.push("motion");
+            want.sort_unstable();
+            assert_eq!(names, want, "{name}");
             assert!(out.stages.iter().any(|(s, _)| *s == "filter"));
         }
     }
@@ -307,9 +414,55 @@ mod tests {
         let cam = Engine::scene_camera(&scene);
         let c = choice();
         let mut engine = Engine::new(scene, &c).unwrap();
-        assert!(engine.still_frame(&cam, &c, &AtomicBool::new(true)).unwrap().is_none());
-        assert_eq!(engine.still_spp(&cam, &c), 0);
-        let out = engine.still_frame(&cam, &c, &AtomicBool::new(false)).unwrap().unwrap();
+        assert!(engine.still_frame((&cam, 0), &c, &AtomicBool::new(true)).unwrap().is_none());
+        assert_eq!(engine.still_spp(&cam, 0, &c), 0);
+        let out = engine.still_frame((&cam, 0), &c, &AtomicBool::new(false)).unwrap().unwrap();
         assert_eq!(out.kind, FrameKind::Still { spp: 2 });
+    }
+
+    /// Frame n of an animation, reached from the rest pose, is `filtrace render --frame n`'s
+    /// film (the scene posed at n, moved n-1 then n), and after a step to n+1 the motion
+    /// layer is that render's motion AOV of frame n+1.
+    #[test]
+    fn animation_frames_are_the_sequence_renders_and_motion_follows_the_step() {
+        let scene = filtrace_scene::builtin("cornell-anim").unwrap();
+        let c = choice();
+        let never = AtomicBool::new(false);
+        let cam_at = |n: i64| scene.pose_at_frame(n).unwrap().camera.unwrap();
+        let reference = |n: i64| {
+            let settings = RenderSettings { width: 16, height: 12, spp: 4, max_depth: 4, seed: 0 };
+            let mut posed = scene.clone();
+            posed.apply_pose(&scene.pose_at_frame(n).unwrap());
+            let mut r = Renderer::new(posed, settings).unwrap();
+            r.prepare_frame(n - 1).unwrap();
+            r.prepare_frame(n).unwrap();
+            (r.render(&never).aovs().color, r.motion_aov().motion)
+        };
+        let mut engine = Engine::new(scene.clone(), &c).unwrap();
+        engine.still_frame((&cam_at(5), 5), &c, &never).unwrap().unwrap();
+        let out = engine.still_frame((&cam_at(5), 5), &c, &never).unwrap().unwrap();
+        assert_eq!(out.layers.get("colour").unwrap(), &reference(5).0);
+        engine.moving_frame((&cam_at(6), 6), &c, (8, 6), &["colour"]).unwrap();
+        let out = engine.still_frame((&cam_at(6), 6), &c, &never).unwrap().unwrap();
+        let (colour, motion) = reference(6);
+        assert_eq!(out.layers.get("motion").unwrap(), &motion);
+        assert!(motion.data().iter().any(|v| *v != 0.0), "the camera moves between frames 5 and 6");
+        let out = engine.still_frame((&cam_at(6), 6), &c, &never).unwrap().unwrap();
+        assert_eq!(out.kind, FrameKind::Still { spp: 4 });
+        assert_eq!(out.layers.get("colour").unwrap(), &colour);
+    }
+
+    #[test]
+    fn the_vpl_renderer_gives_one_frame_with_the_cache_distance() {
+        let scene = filtrace_scene::builtin("cornell").unwrap();
+        let cam = Engine::scene_camera(&scene);
+        let c = RenderChoice { still: StillRenderer::Vpl, ..choice() };
+        let mut engine = Engine::new(scene, &c).unwrap();
+        let never = AtomicBool::new(false);
+        let out = engine.still_frame((&cam, 0), &c, &never).unwrap().unwrap();
+        assert_eq!(out.kind, FrameKind::Still { spp: 2 });
+        assert!(out.layers.has("cache_distance") && out.layers.has("colour"));
+        assert!(engine.still_done(&cam, 0, &c));
+        assert!(engine.still_frame((&cam, 0), &c, &never).unwrap().is_none());
     }
 }

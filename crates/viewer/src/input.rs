@@ -28,6 +28,10 @@ pub enum Action {
     ToggleOverlay,
     /// Show layer `n` of [`crate::layers::LAYERS`].
     Layer(usize),
+    /// Animation: play or pause.
+    TogglePlay,
+    /// Animation: one frame on (1) or back (-1), pausing.
+    StepFrame(i64),
 }
 
 /// Key bindings of [`Action`]s (also listed in the README).
@@ -38,10 +42,24 @@ const ACTION_KEYS: &[(Key, Action)] = &[
     (Key::R, Action::ResetCamera),
     (Key::V, Action::ToggleSplit),
     (Key::O, Action::ToggleOverlay),
+    (Key::Space, Action::TogglePlay),
+    (Key::ArrowRight, Action::StepFrame(1)),
+    (Key::ArrowLeft, Action::StepFrame(-1)),
 ];
 
-const LAYER_KEYS: [Key; 9] =
-    [Key::Num1, Key::Num2, Key::Num3, Key::Num4, Key::Num5, Key::Num6, Key::Num7, Key::Num8, Key::Num9];
+/// Keys 1-9 and 0 pick the first ten layers of [`crate::layers::LAYERS`].
+const LAYER_KEYS: [Key; 10] = [
+    Key::Num1,
+    Key::Num2,
+    Key::Num3,
+    Key::Num4,
+    Key::Num5,
+    Key::Num6,
+    Key::Num7,
+    Key::Num8,
+    Key::Num9,
+    Key::Num0,
+];
 
 /// Which camera move a drag makes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,11 +1,12 @@
 //! The layers (AOVs) the viewer can show and save: one table, [`LAYERS`], one line per
 //! layer. A renderer fills a [`LayerSet`] with the layers it has, by name; the selector
 //! lists every line of the table and greys out what the current frame lacks. A new AOV
-//! (motion vectors, cache-point distance, ...) is one line here plus its producer's
-//! `insert`.
+//! is one line here plus its producer's `insert`.
 
 use filtrace_core::Image;
 use filtrace_io::TonemapParams;
+
+use crate::srgb8::encode;
 
 /// How a layer becomes 8-bit display colour.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -20,6 +21,9 @@ pub enum Display {
     Normalized,
     /// Already in [0, 1] (importance): shown as it is.
     Unit,
+    /// A screen-space offset in pixels (X, Y): the flow colour wheel, hue for the direction
+    /// and saturation for the length over the layer's 99th percentile; still pixels white.
+    Motion,
 }
 
 /// One selectable layer: its name (the EXR layer name too; `""` is the colour in an EXR)
@@ -35,7 +39,7 @@ pub struct LayerDesc {
 const RGB: &[&str] = &["R", "G", "B"];
 const XYZ: &[&str] = &["X", "Y", "Z"];
 
-/// Every layer the viewer knows, in selector order (keys 1-9 pick the first nine).
+/// Every layer the viewer knows, in selector order (keys 1-9 and 0 pick the first ten).
 pub const LAYERS: &[LayerDesc] = &[
     LayerDesc { name: "colour", display: Display::Radiance, channels: RGB },
     LayerDesc { name: "direct", display: Display::Radiance, channels: RGB },
@@ -46,6 +50,8 @@ pub const LAYERS: &[LayerDesc] = &[
     LayerDesc { name: "position", display: Display::Normalized, channels: XYZ },
     LayerDesc { name: "variance", display: Display::Normalized, channels: RGB },
     LayerDesc { name: "importance", display: Display::Unit, channels: &["Y"] },
+    LayerDesc { name: "motion", display: Display::Motion, channels: &["X", "Y"] },
+    LayerDesc { name: "cache_distance", display: Display::Normalized, channels: &["Y"] },
     LayerDesc { name: "noisy", display: Display::Radiance, channels: RGB },
 ];
 
@@ -60,11 +66,29 @@ pub struct LayerSet {
     pub width: usize,
     pub height: usize,
     layers: Vec<(&'static str, Image)>,
+    /// Layers the renderer had but that were not copied out (a moving frame keeps only the
+    /// layers shown): the selector offers them, and the next frame has them.
+    not_kept: Vec<&'static str>,
 }
 
 impl LayerSet {
     pub fn new(width: usize, height: usize) -> Self {
-        Self { width, height, layers: Vec::new() }
+        Self { width, height, layers: Vec::new(), not_kept: Vec::new() }
+    }
+
+    /// Inserts the layer `name` made by `image` when `keep(name)`, else only notes that the
+    /// renderer has it (no copy of its pixels).
+    pub fn offer(&mut self, name: &'static str, keep: &dyn Fn(&str) -> bool, image: impl FnOnce() -> Image) {
+        if keep(name) {
+            self.insert(name, image());
+        } else {
+            self.not_kept.push(name);
+        }
+    }
+
+    /// Names of every layer the renderer had for this frame, kept or not.
+    pub fn available(&self) -> impl Iterator<Item = &'static str> + '_ {
+        self.layers.iter().map(|(n, _)| *n).chain(self.not_kept.iter().copied())
     }
 
     /// Adds (or replaces) layer `name`; a name outside [`LAYERS`] or an image of another
@@ -93,35 +117,85 @@ impl LayerSet {
     }
 }
 
-/// `image` as 8-bit RGB for display, by `display` (a 1-channel layer is shown grey).
-pub fn to_rgb8(image: &Image, display: Display, tonemap: &TonemapParams) -> Vec<u8> {
-    let n = image.pixel_count();
-    let c = image.channels();
-    let grey_or_rgb = |f: &dyn Fn(usize, f32) -> f32| -> Vec<u8> {
-        let mut out = Vec::with_capacity(n * 3);
-        for px in image.data().chunks_exact(c) {
-            for k in 0..3 {
-                let ch = if c >= 3 { k } else { 0 };
-                out.push((f(ch, px[ch]).clamp(0.0, 1.0) * 255.0).round() as u8);
+/// How one frame's layer becomes display RGB, pixel by pixel: built once per frame (the
+/// percentile a normalized or motion layer is scaled by is found here), then applied to
+/// each pixel on any thread ([`crate::display::compose`] maps rows in parallel).
+#[derive(Clone, Copy, Debug)]
+pub struct PixelMap {
+    display: Display,
+    tonemap: TonemapParams,
+    channels: usize,
+    /// Normalized: the 99th percentile of the magnitudes; motion: of the offsets' lengths.
+    scale: f32,
+}
+
+impl PixelMap {
+    pub fn new(image: &Image, display: Display, tonemap: &TonemapParams) -> Self {
+        let scale = match display {
+            Display::Normalized => percentile(image.data().iter().map(|v| v.abs()), 0.99),
+            Display::Motion => {
+                percentile(image.data().chunks_exact(image.channels().max(1)).map(motion_length), 0.99)
             }
-        }
-        out
-    };
-    match display {
-        Display::Radiance if c == 3 => filtrace_io::tonemap_srgb8(image, tonemap).0,
-        Display::Radiance => grey_or_rgb(&|_, v| tonemap.display(v)),
-        Display::Signed => grey_or_rgb(&|_, v| if v.is_finite() { 0.5 + 0.5 * v } else { 0.0 }),
-        Display::Unit => grey_or_rgb(&|_, v| if v.is_finite() { v } else { 0.0 }),
-        Display::Normalized => {
-            let scale = percentile_magnitude(image, 0.99);
-            grey_or_rgb(&|_, v| if v.is_finite() { v.abs() / scale } else { 0.0 })
+            _ => 1.0,
+        };
+        Self { display, tonemap: *tonemap, channels: image.channels(), scale }
+    }
+
+    /// Display RGB of one pixel's channels (a 1-channel layer is grey).
+    #[inline]
+    pub fn map(&self, px: &[f32]) -> [u8; 3] {
+        let unit = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+        let pick = |k: usize| px[if self.channels >= 3 { k } else { 0 }];
+        match self.display {
+            // The PNG writer's bytes (filtrace_io::tonemap_srgb8), by table.
+            Display::Radiance if self.channels == 3 => [0, 1, 2].map(|k| encode(self.tonemap.display(px[k]))),
+            Display::Radiance => [0, 1, 2].map(|k| unit(self.tonemap.display(pick(k)))),
+            Display::Signed => [0, 1, 2].map(|k| unit(0.5 + 0.5 * finite(pick(k)))),
+            Display::Unit => [0, 1, 2].map(|k| unit(finite(pick(k)))),
+            Display::Normalized => [0, 1, 2].map(|k| unit(finite(pick(k)).abs() / self.scale)),
+            Display::Motion => flow_colour(px, self.scale),
         }
     }
 }
 
-/// The `q`-quantile of the finite magnitudes of `image` (1 when there are none or it is 0).
-fn percentile_magnitude(image: &Image, q: f64) -> f32 {
-    let mut v: Vec<f32> = image.data().iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+/// `image` as 8-bit RGB for display, by `display` (a 1-channel layer is shown grey).
+pub fn to_rgb8(image: &Image, display: Display, tonemap: &TonemapParams) -> Vec<u8> {
+    let map = PixelMap::new(image, display, tonemap);
+    image.data().chunks_exact(image.channels().max(1)).flat_map(|px| map.map(px)).collect()
+}
+
+/// Length of a motion offset (0 when not finite or not two channels).
+fn motion_length(px: &[f32]) -> f32 {
+    match px {
+        [x, y, ..] if x.is_finite() && y.is_finite() => x.hypot(*y),
+        _ => 0.0,
+    }
+}
+
+/// The optical-flow colour wheel (as in the Middlebury flow benchmark): the hue is the
+/// direction of the offset (right red, up yellow-green, left cyan, down blue-violet), the
+/// saturation its length over `scale`; no motion is white. Not finite: black.
+fn flow_colour(px: &[f32], scale: f32) -> [u8; 3] {
+    let (x, y) = (px[0], px.get(1).copied().unwrap_or(0.0));
+    if !(x.is_finite() && y.is_finite()) {
+        return [0, 0, 0];
+    }
+    let s = (x.hypot(y) / scale).min(1.0);
+    // Image y points down: up on screen is a positive angle.
+    let turns = (-y).atan2(x).rem_euclid(std::f32::consts::TAU) / std::f32::consts::TAU;
+    let h = turns * 6.0;
+    // HSV to RGB with value 1 (the closed form of Wikipedia's "HSV to RGB alternative").
+    let channel = |n: f32| {
+        let k = (n + h) % 6.0;
+        1.0 - s * k.min(4.0 - k).clamp(0.0, 1.0)
+    };
+    [5.0, 3.0, 1.0].map(|n| (channel(n) * 255.0).round() as u8)
+}
+
+/// The `q`-quantile of the finite `values` (1 when there are none or it is 0).
+fn percentile(values: impl Iterator<Item = f32>, q: f64) -> f32 {
+    let mut v: Vec<f32> = values.filter(|v| v.is_finite()).collect();
     if v.is_empty() {
         return 1.0;
     }
@@ -158,8 +232,18 @@ mod tests {
         let t = TonemapParams::srgb_clamp();
         let img = Image::from_vec(2, 1, 3, vec![-1.0, 0.0, 1.0, 0.5, 0.5, 0.5]).unwrap();
         assert_eq!(to_rgb8(&img, Display::Signed, &t), [0, 128, 255, 191, 191, 191]);
-        // Radiance is exactly the PNG writer's bytes.
-        assert_eq!(to_rgb8(&img, Display::Radiance, &t), filtrace_io::tonemap_srgb8(&img, &t).0);
+        // Radiance is exactly the PNG writer's bytes, whatever the value, exposure and curve.
+        let mut values: Vec<f32> =
+            (0..3000).map(|i| (i as f32 * 0.618).fract().powi(3) * 4.0 - 0.1).collect();
+        values.extend([f32::NAN, f32::INFINITY, -f32::INFINITY, 1e-9, 0.0031308, 1.0, 3e38]);
+        values.truncate(values.len() / 3 * 3);
+        let hdr = Image::from_vec(values.len() / 3, 1, 3, values).unwrap();
+        for exposure in [0.0, -1.5, 2.0] {
+            for (_, preset) in TonemapParams::presets() {
+                let tm = TonemapParams { exposure, ..preset };
+                assert_eq!(to_rgb8(&hdr, Display::Radiance, &tm), filtrace_io::tonemap_srgb8(&hdr, &tm).0);
+            }
+        }
         let depth = Image::from_vec(4, 1, 1, vec![0.0, 1.0, 2.0, f32::NAN]).unwrap();
         assert_eq!(
             to_rgb8(&depth, Display::Normalized, &t),
@@ -167,5 +251,24 @@ mod tests {
         );
         let unit = Image::from_vec(1, 1, 1, vec![0.25]).unwrap();
         assert_eq!(to_rgb8(&unit, Display::Unit, &t), [64, 64, 64]);
+    }
+
+    #[test]
+    fn motion_is_the_flow_colour_wheel() {
+        let t = TonemapParams::srgb_clamp();
+        // Right, up (negative image y), left, down, none; the longest sets the scale.
+        let m = Image::from_vec(5, 1, 2, vec![2.0, 0.0, 0.0, -2.0, -2.0, 0.0, 0.0, 2.0, 0.0, 0.0]).unwrap();
+        let rgb = to_rgb8(&m, Display::Motion, &t);
+        assert_eq!(&rgb[0..3], [255, 0, 0], "right: red");
+        assert_eq!(&rgb[3..6], [128, 255, 0], "up: a quarter turn on");
+        assert_eq!(&rgb[6..9], [0, 255, 255], "left: cyan");
+        assert_eq!(&rgb[9..12], [128, 0, 255], "down: three quarters");
+        assert_eq!(&rgb[12..15], [255, 255, 255], "no motion: white");
+        let half = Image::from_vec(2, 1, 2, vec![1.0, 0.0, 2.0, 0.0]).unwrap();
+        assert_eq!(
+            &to_rgb8(&half, Display::Motion, &t)[0..3],
+            [255, 128, 128],
+            "half the scale: half saturated"
+        );
     }
 }

@@ -16,7 +16,8 @@
 //! Modules: [`camera`] (camera moves), [`input`] (window input to moves and actions),
 //! [`engine`] (the frames of one scene), [`worker`] (the render thread), [`layers`] and
 //! [`display`] (AOVs to display colour), [`scene_watch`] (loading and reloading), [`save`],
-//! [`settings`], and the window: `app`, `panel`, `overlay`, `stats`.
+//! [`settings`], [`timeline`] (animation frame, playback, camera track), and the window:
+//! `app`, `panel`, `overlay`, `stats`.
 
 pub mod camera;
 pub mod display;
@@ -26,6 +27,8 @@ pub mod layers;
 pub mod save;
 pub mod scene_watch;
 pub mod settings;
+mod srgb8;
+pub mod timeline;
 pub mod worker;
 
 mod app;
@@ -74,6 +77,12 @@ pub struct ViewerOptions {
     pub no_overlay: bool,
     /// Light bare mesh files by the default sky and sun.
     pub default_light: bool,
+    /// Animation frame shown at start (default: the first).
+    pub frame: Option<i64>,
+    /// Start the animation playing.
+    pub play: bool,
+    /// The still image's renderer.
+    pub still: settings::StillRenderer,
 }
 
 impl ViewerOptions {
@@ -100,6 +109,9 @@ impl ViewerOptions {
             log_frames: false,
             no_overlay: false,
             default_light: true,
+            frame: None,
+            play: false,
+            still: settings::StillRenderer::PathTracer,
         }
     }
 
@@ -129,11 +141,17 @@ pub struct ViewerOutcome {
     pub camera: Option<Camera>,
     /// Longest UI frame (ms) while a render ran, and how many such frames there were.
     pub max_ui_frame_ms: f64,
+    pub mean_ui_frame_ms: f64,
     pub ui_frames_while_rendering: u64,
     /// Moving frames shown, their mean render time (ms) and mean pixel count.
     pub moving_frames: u64,
     pub moving_mean_ms: f64,
     pub moving_mean_pixels: f64,
+    /// Mean milliseconds of each stage of the moving frames (render stages, then
+    /// `display`: tone mapping into the texture's pixels).
+    pub moving_stages: Vec<(&'static str, f64)>,
+    /// Moving frames shown per second, wall clock from the first to the last.
+    pub moving_shown_fps: f64,
     /// The scene never loaded: why.
     pub load_error: Option<String>,
     /// A screenshot could not be written.

@@ -21,6 +21,7 @@ pub fn draw(
     painter: &egui::Painter,
     rect: egui::Rect,
     shown: Option<&Published>,
+    animated: bool,
     stats: &UiStats,
     message: Option<&str>,
 ) {
@@ -34,6 +35,9 @@ pub fn draw(
             format!("moving {w}x{h} ({:.0}%)  1 spp  {}", scale * 100.0, f.job.render.filter.name)
         }
     }];
+    if animated {
+        lines.push(format!("animation frame {}", f.job.frame));
+    }
     lines.push(format!("render {:.1} fps, frame {:.1} ms", stats.render_fps(), f.total_ms));
     lines.push(format!(
         "UI {:.0} fps, {:.1} ms (max {:.1} rendering)",

@@ -23,6 +23,10 @@ fn show(ui: &mut egui::Ui, app: &mut ViewerApp) {
         ui.heading("filtrace view");
         ui.label(&app.opts.scene);
         ui.separator();
+        if app.timeline.is_some() {
+            timeline_section(ui, app);
+            ui.separator();
+        }
         render_section(ui, app);
         ui.separator();
         filter_section(ui, app);
@@ -31,6 +35,40 @@ fn show(ui: &mut egui::Ui, app: &mut ViewerApp) {
         ui.separator();
         camera_section(ui, app);
     });
+}
+
+/// Play/pause, step, scrub; frame number and time; the camera track.
+fn timeline_section(ui: &mut egui::Ui, app: &mut ViewerApp) {
+    let Some(t) = &app.timeline else { return };
+    let (clock, mut frame, playing) = (t.clock, t.frame(), t.playing());
+    ui.label(format!(
+        "Animation: frame {frame} ({:.3} s) of {}..{} at {} fps",
+        t.time(),
+        clock.first,
+        clock.last,
+        clock.fps
+    ));
+    ui.horizontal(|ui| {
+        if ui.button("<").on_hover_text("previous frame (Left)").clicked() {
+            app.timeline_action(Action::StepFrame(-1));
+        }
+        let label = if playing { "pause (Space)" } else { "play (Space)" };
+        if ui.button(label).clicked() {
+            app.timeline_action(Action::TogglePlay);
+        }
+        if ui.button(">").on_hover_text("next frame (Right)").clicked() {
+            app.timeline_action(Action::StepFrame(1));
+        }
+    });
+    if ui.add(Slider::new(&mut frame, clock.first..=clock.last).text("frame")).changed() {
+        if let Some(t) = &mut app.timeline {
+            t.set_frame(frame);
+        }
+        app.last_change = Some(std::time::Instant::now());
+    }
+    if let Some(t) = app.timeline.as_mut().filter(|t| t.has_camera_track()) {
+        ui.checkbox(&mut t.follow_camera, "camera follows the animation (R)");
+    }
 }
 
 fn render_section(ui: &mut egui::Ui, app: &mut ViewerApp) {
@@ -117,8 +155,7 @@ fn optional_slider(
 }
 
 fn display_section(ui: &mut egui::Ui, app: &mut ViewerApp) {
-    let available: Vec<&str> =
-        app.shown.as_ref().map(|s| s.layers.iter().map(|(d, _)| d.name).collect()).unwrap_or_default();
+    let available: Vec<&str> = app.shown.as_ref().map(|s| s.layers.available().collect()).unwrap_or_default();
     let d = &mut app.display;
     ui.label("View");
     layer_combo(ui, "layer", &mut d.layer, &available);
@@ -145,7 +182,7 @@ fn display_section(ui: &mut egui::Ui, app: &mut ViewerApp) {
 fn layer_combo(ui: &mut egui::Ui, id: &str, layer: &mut &'static str, available: &[&str]) {
     ComboBox::from_id_salt(id).selected_text(format!("{id}: {layer}")).show_ui(ui, |ui| {
         for (i, l) in LAYERS.iter().enumerate() {
-            let text = if i < 9 { format!("{} ({})", l.name, i + 1) } else { l.name.to_string() };
+            let text = if i < 10 { format!("{} ({})", l.name, (i + 1) % 10) } else { l.name.to_string() };
             let text = if available.contains(&l.name) {
                 egui::RichText::new(text)
             } else {

@@ -8,19 +8,22 @@ use filtrace_pipeline::FilterChoice;
 /// The filters of the moving (1-spp) pipeline, in selector order; the first is the default.
 pub const FILTERS: &[&str] = &["guided", "atrous", "bilateral", "none"];
 
-/// The renderers of the still image. The many-light renderer (issue 14) becomes a second
-/// line here and a branch in `engine::Engine::still_frame` when it lands.
+/// The renderers of the still image (a branch each in `engine::Engine::still_frame`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StillRenderer {
     /// Progressive path tracing (`filtrace render`'s image).
     PathTracer,
+    /// The many-light renderer: VPLs with the importance cache (`filtrace render
+    /// --integrator vpl`), one frame of `spp_per_frame` samples.
+    Vpl,
 }
 
 impl StillRenderer {
-    pub const ALL: &'static [StillRenderer] = &[StillRenderer::PathTracer];
+    pub const ALL: &'static [StillRenderer] = &[StillRenderer::PathTracer, StillRenderer::Vpl];
     pub fn label(self) -> &'static str {
         match self {
             StillRenderer::PathTracer => "path tracer (progressive)",
+            StillRenderer::Vpl => "many-light VPL (one frame)",
         }
     }
 }

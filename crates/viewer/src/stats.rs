@@ -25,6 +25,8 @@ pub struct UiStats {
     /// published frame (before it: font atlas, first texture, llvmpipe's shader compiles).
     pub max_busy_frame_ms: f64,
     pub busy_frames: u64,
+    /// Summed milliseconds of those frames (for their mean).
+    busy_ms: f64,
     /// Last UI frame (ms).
     pub last_ui_ms: f64,
     started: Option<Instant>,
@@ -32,6 +34,10 @@ pub struct UiStats {
     pub moving_frames: u64,
     moving_ms: f64,
     moving_pixels: f64,
+    /// Summed milliseconds of each stage over the moving frames, in first-seen order.
+    moving_stages: Vec<(&'static str, f64)>,
+    /// When the first and the last moving frame were taken (the shown rate, wall clock).
+    moving_span: Option<(Instant, Instant)>,
 }
 
 fn push(q: &mut VecDeque<Instant>, now: Instant) {
@@ -61,6 +67,7 @@ impl UiStats {
         if worker_busy && settled {
             self.busy_frames += 1;
             self.max_busy_frame_ms = self.max_busy_frame_ms.max(self.last_ui_ms);
+            self.busy_ms += self.last_ui_ms;
         }
     }
 
@@ -68,10 +75,40 @@ impl UiStats {
         self.started.get_or_insert_with(Instant::now);
         push(&mut self.published, Instant::now());
         if let FrameKind::Moving { .. } = frame.kind {
+            let now = Instant::now();
+            self.moving_span = Some(self.moving_span.map_or((now, now), |(first, _)| (first, now)));
             self.moving_frames += 1;
             self.moving_ms += frame.total_ms;
             self.moving_pixels += (frame.image.size[0] * frame.image.size[1]) as f64;
+            for &(name, ms) in &frame.stages {
+                match self.moving_stages.iter_mut().find(|(n, _)| *n == name) {
+                    Some((_, sum)) => *sum += ms,
+                    None => self.moving_stages.push((name, ms)),
+                }
+            }
         }
+    }
+
+    /// Mean milliseconds of each stage over the moving frames.
+    pub fn moving_stage_means(&self) -> Vec<(&'static str, f64)> {
+        let n = self.moving_frames.max(1) as f64;
+        self.moving_stages.iter().map(|&(name, sum)| (name, sum / n)).collect()
+    }
+
+    /// Moving frames shown per second of wall clock, first to last (0 with fewer than two).
+    /// The scene moves without pause in a speed measurement, so this is the shown rate.
+    pub fn moving_shown_fps(&self) -> f64 {
+        match self.moving_span {
+            Some((a, b)) if self.moving_frames > 1 => {
+                (self.moving_frames - 1) as f64 / b.duration_since(a).as_secs_f64().max(1e-9)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Mean UI frame (ms) while a render ran.
+    pub fn mean_busy_frame_ms(&self) -> f64 {
+        self.busy_ms / self.busy_frames.max(1) as f64
     }
 
     /// Moving frames: (count, mean render ms, mean pixel count).
@@ -101,8 +138,9 @@ pub fn describe(f: &Published, image_at: (f32, f32)) -> String {
     let [w, h] = f.image.size;
     let stages: Vec<String> = f.stages.iter().map(|(s, ms)| format!("{s}={ms:.1}")).collect();
     format!(
-        "{kind} size={w}x{h} layer={} ms={:.1} {} image={},{} camera={}",
+        "{kind} size={w}x{h} layer={} anim_frame={} ms={:.1} {} image={},{} camera={}",
         f.job.display.layer,
+        f.job.frame,
         f.total_ms,
         stages.join(" "),
         image_at.0.round(),

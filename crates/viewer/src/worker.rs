@@ -22,6 +22,8 @@ use crate::settings::{DisplayChoice, RenderChoice};
 #[derive(Clone, Debug, PartialEq)]
 pub struct Job {
     pub camera: Camera,
+    /// Frame of the scene's animation (0 for a still scene).
+    pub frame: i64,
     pub render: RenderChoice,
     pub display: DisplayChoice,
     /// The camera is moving: render the fast filtered frame.
@@ -31,8 +33,9 @@ pub struct Job {
 /// A frame ready for the screen.
 #[derive(Clone)]
 pub struct Published {
-    /// Display colour of the frame (the chosen layer, or the split of two layers).
-    pub image: egui::ColorImage,
+    /// Display colour of the frame (the chosen layer, or the split of two layers), shared
+    /// with the texture upload (no copy of the pixels on the UI thread).
+    pub image: Arc<egui::ColorImage>,
     pub layers: Arc<crate::layers::LayerSet>,
     pub kind: FrameKind,
     pub stages: Vec<(&'static str, f64)>,
@@ -89,7 +92,7 @@ impl Worker {
         let mut s = lock.lock().unwrap_or_else(|p| p.into_inner());
         if s.job.as_ref() != Some(&job) {
             let restarts = match &s.job {
-                Some(old) => old.camera != job.camera || old.render != job.render,
+                Some(old) => old.camera != job.camera || old.frame != job.frame || old.render != job.render,
                 None => true,
             };
             if restarts {
@@ -243,11 +246,12 @@ fn next_task(shared: &(Mutex<Shared>, Condvar), st: &State, cancel: &AtomicBool)
                 continue;
             }
             let last = st.last.as_ref().map(|(_, j)| j);
-            let same_frame = last.is_some_and(|l| l.camera == job.camera && l.render == job.render);
-            if job.moving && !same_frame {
+            let same_frame = last
+                .is_some_and(|l| l.camera == job.camera && l.frame == job.frame && l.render == job.render);
+            if job.moving && (!same_frame || st.last.as_ref().is_some_and(|(f, _)| lacks_shown(f, job))) {
                 return Task::Render(job.clone());
             }
-            if !job.moving && engine.still_spp(&job.camera, &job.render) < job.render.max_spp {
+            if !job.moving && !engine.still_done(&job.camera, job.frame, &job.render) {
                 return Task::Render(job.clone());
             }
             if last.is_some_and(|l| l.display != job.display || l.moving != job.moving) && same_frame {
@@ -258,6 +262,22 @@ fn next_task(shared: &(Mutex<Shared>, Condvar), st: &State, cancel: &AtomicBool)
     }
 }
 
+/// The layers `job` shows.
+fn shown_layers(job: &Job) -> Vec<&'static str> {
+    let d = &job.display;
+    if d.split {
+        vec![d.layer, d.split_layer]
+    } else {
+        vec![d.layer]
+    }
+}
+
+/// `frame` lacks a layer `job` shows that its renderer could have given (a moving frame
+/// keeps only the layers shown): the frame is rendered again rather than shown black.
+fn lacks_shown(frame: &FrameOut, job: &Job) -> bool {
+    shown_layers(job).iter().any(|n| !frame.layers.has(n) && frame.layers.available().any(|a| a == *n))
+}
+
 /// Renders `job`'s next frame; `None` when there is nothing new to show (a cancelled
 /// pass, a film at its sample limit).
 fn render(st: &mut State, job: &Job, cancel: &AtomicBool) -> Result<Option<FrameOut>, String> {
@@ -265,13 +285,13 @@ fn render(st: &mut State, job: &Job, cancel: &AtomicBool) -> Result<Option<Frame
     let c = &job.render;
     if job.moving {
         let size = scaled(c.width, c.height, st.scale);
-        let r = engine.moving_frame(&job.camera, c, size);
+        let r = engine.moving_frame((&job.camera, job.frame), c, size, &shown_layers(job));
         if let Ok(f) = &r {
             st.scale = adapt_scale(st.scale, f.total_ms, c.target_fps);
         }
         r.map(Some)
     } else {
-        engine.still_frame(&job.camera, c, cancel)
+        engine.still_frame((&job.camera, job.frame), c, cancel)
     }
 }
 
@@ -282,7 +302,7 @@ fn publish(shared: &(Mutex<Shared>, Condvar), frame: FrameOut, job: Job, st: &mu
     let mut stages = frame.stages.clone();
     stages.push(("display", display_ms));
     let p = Published {
-        image,
+        image: Arc::new(image),
         layers: frame.layers.clone(),
         kind: frame.kind,
         stages,

@@ -8,6 +8,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use filtrace_pipeline::FilterChoice;
+use filtrace_viewer::settings::StillRenderer;
 use filtrace_viewer::{layers, ViewerOptions};
 
 use super::render::{parse_resolution, Resolution};
@@ -77,6 +78,16 @@ pub struct Args {
     /// Do not light a bare mesh file without lights by the default sky and sun.
     #[arg(long)]
     pub no_default_light: bool,
+    /// Animation frame shown at start (the still image is `filtrace render --frame N`'s).
+    #[arg(long, value_name = "N", value_parser = super::sequence::parse_frame)]
+    pub frame: Option<u64>,
+    /// Start the animation playing (Space plays and pauses).
+    #[arg(long)]
+    pub play: bool,
+    /// Renderer of the still image: progressive path tracing, or the many-light renderer
+    /// (one frame of --spp-per-frame samples, as `filtrace render --integrator vpl`).
+    #[arg(long, default_value = "path", value_parser = ["path", "vpl"])]
+    pub integrator: String,
 }
 
 fn parse_depth(s: &str) -> Result<i32, String> {
@@ -118,23 +129,35 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     o.log_frames = a.log_frames;
     o.no_overlay = a.no_overlay;
     o.default_light = !a.no_default_light;
+    o.frame = a.frame.map(|f| f as i64);
+    o.play = a.play;
+    o.still = match a.integrator.as_str() {
+        "vpl" => StillRenderer::Vpl,
+        _ => StillRenderer::PathTracer,
+    };
     let outcome = filtrace_viewer::run(o).map_err(anyhow::Error::msg)?;
     let camera = outcome.camera.as_ref().map(filtrace_viewer::camera::format_camera).unwrap_or_default();
     // The summary goes to stderr: stdout stays free for tools.
     let mut err = std::io::stderr();
     let moving = match outcome.moving_frames {
         0 => "no moving frames".to_string(),
-        n => format!(
-            "{n} moving frames, mean {:.1} ms ({:.1} fps), mean {:.0} pixels",
-            outcome.moving_mean_ms,
-            1000.0 / outcome.moving_mean_ms.max(1e-9),
-            outcome.moving_mean_pixels
-        ),
+        n => {
+            let stages: Vec<String> =
+                outcome.moving_stages.iter().map(|(s, ms)| format!("{s} {ms:.1}")).collect();
+            format!(
+                "{n} moving frames, mean {:.1} ms ({:.1} fps), shown {:.1} fps, mean {:.0} pixels, stages (mean ms) {}",
+                outcome.moving_mean_ms,
+                1000.0 / outcome.moving_mean_ms.max(1e-9),
+                outcome.moving_shown_fps,
+                outcome.moving_mean_pixels,
+                stages.join(", ")
+            )
+        }
     };
     writeln!(
         err,
-        "filtrace view: closed; camera {camera}; longest UI frame while rendering {:.1} ms over {} frames; {moving}",
-        outcome.max_ui_frame_ms, outcome.ui_frames_while_rendering
+        "filtrace view: closed; camera {camera}; longest UI frame while rendering {:.1} ms (mean {:.1}) over {} frames; {moving}",
+        outcome.max_ui_frame_ms, outcome.mean_ui_frame_ms, outcome.ui_frames_while_rendering
     )?;
     if let Some(e) = outcome.load_error {
         anyhow::bail!("{e}");

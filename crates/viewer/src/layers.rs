@@ -4,7 +4,7 @@
 //! is one line here plus its producer's `insert`.
 
 use filtrace_core::Image;
-use filtrace_io::TonemapParams;
+use filtrace_io::{Tonemap, TonemapParams};
 
 use crate::srgb8::encode;
 
@@ -127,6 +127,8 @@ pub struct PixelMap {
     channels: usize,
     /// Normalized: the 99th percentile of the magnitudes; motion: of the offsets' lengths.
     scale: f32,
+    /// `2^exposure`, once per frame rather than per value.
+    gain: f32,
 }
 
 impl PixelMap {
@@ -138,7 +140,23 @@ impl PixelMap {
             }
             _ => 1.0,
         };
-        Self { display, tonemap: *tonemap, channels: image.channels(), scale }
+        let gain = tonemap.exposure.exp2();
+        Self { display, tonemap: *tonemap, channels: image.channels(), scale, gain }
+    }
+
+    /// [`TonemapParams::display`] with the exposure's gain computed once: the same
+    /// arithmetic, so the same value (`display_mappings` holds it to the PNG writer's bytes).
+    #[inline]
+    fn display_value(&self, v: f32) -> f32 {
+        if !v.is_finite() {
+            return 0.0;
+        }
+        let x = (v * self.gain).max(0.0);
+        let y = match self.tonemap.curve {
+            Tonemap::Clamp => x,
+            Tonemap::Filmic => (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14),
+        };
+        y.clamp(0.0, 1.0)
     }
 
     /// Display RGB of one pixel's channels (a 1-channel layer is grey).
@@ -149,8 +167,8 @@ impl PixelMap {
         let pick = |k: usize| px[if self.channels >= 3 { k } else { 0 }];
         match self.display {
             // The PNG writer's bytes (filtrace_io::tonemap_srgb8), by table.
-            Display::Radiance if self.channels == 3 => [0, 1, 2].map(|k| encode(self.tonemap.display(px[k]))),
-            Display::Radiance => [0, 1, 2].map(|k| unit(self.tonemap.display(pick(k)))),
+            Display::Radiance if self.channels == 3 => [0, 1, 2].map(|k| encode(self.display_value(px[k]))),
+            Display::Radiance => [0, 1, 2].map(|k| unit(self.display_value(pick(k)))),
             Display::Signed => [0, 1, 2].map(|k| unit(0.5 + 0.5 * finite(pick(k)))),
             Display::Unit => [0, 1, 2].map(|k| unit(finite(pick(k)))),
             Display::Normalized => [0, 1, 2].map(|k| unit(finite(pick(k)).abs() / self.scale)),

@@ -50,6 +50,7 @@ awk -v res="$res" -v secs="$seconds" '
     for (i = 1; i <= NF; i++) {
         split($i, kv, "=")
         if (kv[1] ~ /^(kind|scale|size|layer|image|camera|anim_frame)$/ || kv[2] == "") continue
+        if (kv[1] == "ms") kv[1] = "frame"
         if (!(kv[1] in sum)) order[++n] = kv[1]
         sum[kv[1]] += kv[2]
     }

@@ -156,7 +156,20 @@ pub fn relaxed_geometry_term_fast(
     if !(r > 0.0) {
         return if radius > 0.0 { 1.0 / (radius * radius) } else { 0.0 };
     }
-    let w = d / r;
+    relaxed_geometry_term_towards(n0, d / r, r, n_vpl, radius, normal_cone)
+}
+
+/// [`relaxed_geometry_term_fast`] for a VPL at distance `r > 0` along the unit direction
+/// `w` from the record (for callers that already have them).
+#[inline]
+pub fn relaxed_geometry_term_towards(
+    n0: Vec3,
+    w: Vec3,
+    r: f32,
+    n_vpl: Option<Vec3>,
+    radius: f32,
+    normal_cone: f32,
+) -> f32 {
     let sin_delta = (radius / r).min(1.0);
     let cos_delta = (1.0 - sin_delta * sin_delta).max(0.0).sqrt();
     let delta = Slack { cos: cos_delta, sin: sin_delta, at_least_pi: false };

@@ -7,7 +7,9 @@
 
 use super::eval::{contribution, Receiver};
 use super::{Vpl, VplKind, Vpls};
-use crate::cache::{relaxed_geometry_term_fast, CachePoint, RecordValues, VplSet};
+use crate::cache::{
+    relaxed_geometry_term_fast, relaxed_geometry_term_towards, CachePoint, RecordValues, VplSet,
+};
 use filtrace_accel::{RayPacket, SceneAccel, LANES};
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{luminance, Ray, Rgb, Vec3};
@@ -114,7 +116,10 @@ pub struct SceneVpls<'a> {
 /// not vanish where a neighbour could receive light).
 #[inline]
 fn f_folded(bsdf: &filtrace_render::bsdf::SurfaceBsdf, wo: Vec3, wi: Vec3) -> Rgb {
-    bsdf.f(wo, Vec3::new(wi.x, wi.y, wi.z.abs().max(1e-3)).normalize())
+    let z = wi.z.abs();
+    // A unit `wi` stays unit when folded; only the clamp near the horizon needs a normalise.
+    let folded = if z >= 1e-3 { Vec3::new(wi.x, wi.y, z) } else { Vec3::new(wi.x, wi.y, 1e-3).normalize() };
+    bsdf.f(wo, folded)
 }
 
 impl SceneVpls<'_> {
@@ -123,13 +128,25 @@ impl SceneVpls<'_> {
     }
 
     /// `E f_VPL f0` at folded directions times the relaxed geometry term (the cache's
-    /// [`relaxed_geometry_term_fast`]); distant VPLs have no distance to relax.
+    /// [`relaxed_geometry_term_fast`]); distant VPLs have no distance to relax. The
+    /// direction and distance are found once for both; a receiver that reflects nothing
+    /// towards the camera (seen from behind) gets 0 without the rest.
     fn bounded_at(&self, v: &Vpl, rx: &Receiver, radius: f32) -> Rgb {
-        let w = match v.kind {
-            VplKind::Distant => v.n,
-            _ => (v.p - rx.si.p).normalize_or_zero(),
-        };
+        if let VplKind::Distant = v.kind {
+            return v.weight * f_folded(&rx.bsdf, rx.wo, rx.frame.to_local(v.n));
+        }
+        let d = v.p - rx.si.p;
+        let r = d.length();
+        if !(r > 0.0 && r.is_finite()) {
+            let n_vpl = v.surface_normal();
+            let f0 = f_folded(&rx.bsdf, rx.wo, Vec3::Z);
+            return v.weight * f0 * relaxed_geometry_term_fast(rx.si.p, rx.si.n_s, v.p, n_vpl, radius, 0.0);
+        }
+        let w = d / r;
         let f0 = f_folded(&rx.bsdf, rx.wo, rx.frame.to_local(w));
+        if f0 == Rgb::ZERO {
+            return Rgb::ZERO;
+        }
         let (emit, n_vpl) = match v.kind {
             // A two-sided emitter lights the receiver's side with the face towards it.
             VplKind::Emitter { two_sided } => {
@@ -138,10 +155,9 @@ impl SceneVpls<'_> {
             VplKind::Surface { bsdf, frame, wi_local } => {
                 (f_folded(&bsdf, frame.to_local(-w), wi_local) * v.weight, Some(v.n))
             }
-            VplKind::Point | VplKind::Spot { .. } => (v.weight, None),
-            VplKind::Distant => return v.weight * f0,
+            VplKind::Point | VplKind::Spot { .. } | VplKind::Distant => (v.weight, None),
         };
-        emit * f0 * relaxed_geometry_term_fast(rx.si.p, rx.si.n_s, v.p, n_vpl, radius, 0.0)
+        emit * f0 * relaxed_geometry_term_towards(rx.si.n_s, w, r, n_vpl, radius, 0.0)
     }
 }
 

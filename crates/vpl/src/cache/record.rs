@@ -123,17 +123,18 @@ impl VplCdf {
     /// The distribution of `weights` (non-finite and negative ones count as 0; all zero:
     /// uniform).
     pub fn new(weights: &[f32]) -> Self {
-        let sanitised = |w: f32| if w.is_finite() && w > 0.0 { w } else { 0.0 };
-        let n = weights.len();
-        let total64: f64 = weights.iter().map(|&w| sanitised(w) as f64).sum();
+        let func: Vec<f32> =
+            weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 }).collect();
+        let n = func.len();
+        let total64: f64 = func.iter().map(|&w| w as f64).sum();
         let mut cdf = Vec::with_capacity(n + 1);
         cdf.push(0.0f32);
         if total64 > 0.0 && total64.is_finite() {
             let mut acc = 0.0f64;
-            for &w in weights {
-                acc += sanitised(w) as f64;
-                cdf.push((acc / total64) as f32);
-            }
+            cdf.extend(func.iter().map(|&w| {
+                acc += w as f64;
+                (acc / total64) as f32
+            }));
         } else {
             cdf.extend((1..=n).map(|i| i as f32 / n as f32));
         }

@@ -42,10 +42,13 @@ mod tests;
 pub use alpha_max::{alpha_max_owner, alpha_max_weight};
 pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, SampleFeedback, StepOutcome};
 pub use placement::{place_cache_points, GBufferView};
-pub use record::{CacheRecord, ImportanceCache};
+pub use record::{CacheRecord, ImportanceCache, VplCdf};
 pub use sampler::{sample_uniform_vpl, SamplePlan, VplDraw, MAX_DRAWS};
 pub use search::{cache_distance, KdTree, Nearest, Neighbours, MAX_NEIGHBOURS};
-pub use vpl_set::{relaxed_geometry_term, RecordValues, VplSet};
+pub use vpl_set::{
+    evaluate_each_vpl, relaxed_geometry_term, relaxed_geometry_term_fast, relaxed_geometry_term_towards,
+    RecordValues, VplSet,
+};
 
 use filtrace_core::Vec3;
 

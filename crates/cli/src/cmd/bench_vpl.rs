@@ -5,7 +5,7 @@
 use super::render::{parse_resolution, Resolution};
 use filtrace_render::{RenderSettings, Renderer};
 use filtrace_vpl::cache::{CacheParams, SamplerKind};
-use filtrace_vpl::vpls::{render_vpl_frame, VplParams, VplSettings};
+use filtrace_vpl::vpls::{render_vpl_frame, StageTimes, VplParams, VplSettings};
 use serde::Serialize;
 use std::io::Write;
 use std::sync::atomic::AtomicBool;
@@ -23,6 +23,10 @@ pub struct Args {
     pub vpls: usize,
     #[arg(long, default_value_t = 1024)]
     pub cache_points: usize,
+    /// Frames per sampler; each stage reports its median over them (the first frame
+    /// also pays for cold caches and page faults).
+    #[arg(long, default_value_t = 1)]
+    pub repeat: usize,
     /// Comma-separated samplers (default: all five).
     #[arg(long, value_delimiter = ',')]
     pub samplers: Vec<String>,
@@ -70,11 +74,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             cache: CacheParams { cache_points: args.cache_points, ..CacheParams::default() },
             ground_truth: false,
         };
-        let frame = render_vpl_frame(&renderer, &vs, args.spp, &cancel)
-            .map_err(|e| anyhow::anyhow!(e))?
-            .ok_or_else(|| anyhow::anyhow!("cancelled"))?;
-        let t = frame.times;
-        let mean = frame.film.aovs().color.mean();
+        let mut frames = Vec::new();
+        for _ in 0..args.repeat.max(1) {
+            let frame = render_vpl_frame(&renderer, &vs, args.spp, &cancel)
+                .map_err(|e| anyhow::anyhow!(e))?
+                .ok_or_else(|| anyhow::anyhow!("cancelled"))?;
+            frames.push(frame);
+        }
+        let t = median_times(frames.iter().map(|f| f.times).collect());
+        let mean = frames[0].film.aovs().color.mean();
         rows.push(Row {
             sampler: sampler.name().into(),
             vpl_generation_ms: t.vpl_generation_ms,
@@ -90,19 +98,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         writeln!(
             o,
             "{}",
-            serde_json::json!({ "scene": args.scene, "res": args.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "threads": rayon::current_num_threads(), "rows": rows })
+            serde_json::json!({ "scene": args.scene, "res": args.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "repeat": args.repeat.max(1), "threads": rayon::current_num_threads(), "rows": rows })
         )?;
         return Ok(());
     }
     writeln!(
         o,
-        "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points, {} threads (ms)\n",
+        "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points, {} threads, median of {} (ms)\n",
         args.scene,
         args.res,
         args.spp,
         args.vpls,
         args.cache_points,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        args.repeat.max(1)
     )?;
     writeln!(
         o,
@@ -122,4 +131,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// Per stage, the median over the frames (the upper one for an even count).
+fn median_times(times: Vec<StageTimes>) -> StageTimes {
+    let median = |f: fn(&StageTimes) -> f64| {
+        let mut v: Vec<f64> = times.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    StageTimes {
+        vpl_generation_ms: median(|t| t.vpl_generation_ms),
+        cache_ms: median(|t| t.cache_ms),
+        shading_ms: median(|t| t.shading_ms),
+        optimisation_ms: median(|t| t.optimisation_ms),
+    }
 }

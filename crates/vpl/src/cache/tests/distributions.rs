@@ -58,7 +58,7 @@ fn distributions_hold_the_scene_values() {
         for j in 0..VPLS {
             let e2 = filtrace_core::luminance(scene.unoccluded_at(j, x, n));
             let e1 = filtrace_core::luminance(scene.contribution(j, x, n));
-            let share = |d: &filtrace_core::sampling::Distribution1D, v: f32| d.pmf(j) * d.total() - v;
+            let share = |d: &VplCdf, v: f32| d.pmf(j) * d.total() - v;
             assert!(share(full, e1).abs() <= 1e-4 * full.total(), "E1 of VPL {j}");
             assert!(share(unocc, e2).abs() <= 1e-4 * unocc.total(), "E2 of VPL {j}");
             if (scene.vpls[j].position - x).length() > 2.0 * r.radius {

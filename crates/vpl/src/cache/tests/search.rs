@@ -52,6 +52,34 @@ fn kd_tree_matches_brute_force() {
     }
 }
 
+/// The warm start (each thread's previous result seeds the next query) changes nothing:
+/// coherent queries along a path, alternating between two trees over the same indices
+/// (whose previous results must not leak into each other), and on two threads, all
+/// equal brute force.
+#[test]
+fn warm_started_queries_match_brute_force() {
+    let mut rng = SplitMix64::new(0xa11);
+    let (pa, na) = point_set(0, 500, &mut rng);
+    let (pb, nb) = point_set(2, 500, &mut rng);
+    let trees = [KdTree::new(&pa, &na, 0.3), KdTree::new(&pb, &nb, 0.3)];
+    let walk = |start: f32| {
+        for s in 0..400 {
+            let t = start + s as f32 * 0.01;
+            let q = Vec3::new(t.sin() * 3.0, t * 0.5 - 1.0, t.cos() * 2.0);
+            let qn = Vec3::new(t.cos(), 0.5, t.sin()).normalize();
+            let tree = &trees[s % 2 + (s % 7 == 0) as usize * (1 - s % 2)];
+            for k in [3, 5, 1] {
+                let fast = tree.nearest(q, qn, k);
+                assert_eq!(fast.as_slice(), &tree.nearest_brute_force(q, qn, k)[..], "step {s}, k {k}");
+            }
+        }
+    };
+    std::thread::scope(|scope| {
+        scope.spawn(|| walk(0.0));
+        scope.spawn(|| walk(1.7));
+    });
+}
+
 #[test]
 fn search_handles_empty_sets_and_bad_queries() {
     let tree = KdTree::new(&[], &[], 1.0);

@@ -64,10 +64,14 @@ pub fn adaptive_bytes(w: u32, h: u32) -> u64 {
     image_bytes(w, h, 3)
 }
 
+/// Channels of the motion AOV (`motion.X/Y`, `prev_depth.Z`, `prev_normal.X/Y/Z`).
+pub const MOTION_CHANNELS: u32 = 6;
+
 /// Channels `filtrace render --filter` writes: every frame layer but the guide's coverage
-/// (`filtered_direct` when on), and adaptive sampling's importance and path counts.
+/// (`filtered_direct` when on), adaptive sampling's importance and path counts, and the
+/// motion AOV.
 pub fn written_channels(st: &PipelineSettings, adaptive: bool) -> u32 {
-    FRAME_CHANNELS - 1 + if st.filter_direct { 3 } else { 0 } + if adaptive { 2 } else { 0 }
+    FRAME_CHANNELS - 1 + if st.filter_direct { 3 } else { 0 } + if adaptive { 2 } else { 0 } + MOTION_CHANNELS
 }
 
 /// Everything a filtered render of `st` with filter `filter` keeps alive while its EXR is

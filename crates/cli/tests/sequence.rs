@@ -147,6 +147,36 @@ fn filtered_and_adaptive_sequences_write_every_frame() {
 }
 
 #[test]
+fn filtered_sequence_frames_carry_the_motion_layers_of_the_plain_frames() {
+    // The motion AOV depends on the camera and the instances only, not on the integrator:
+    // filtered (and adaptive) frames of an animation write the layers the plain frames
+    // write, with the same values, and the camera move makes them non-zero.
+    let dir = temp_dir("motion");
+    ok(render("cornell-anim", &["--frames", "1..2"], &dir.join("plain.exr")));
+    let channels =
+        ["motion.X", "motion.Y", "prev_depth.Z", "prev_normal.X", "prev_normal.Y", "prev_normal.Z"];
+    for (tag, mode) in [("f", &["--filter", "guided"][..]), ("a", &["--adaptive", "--budget-spp", "1"][..])] {
+        let args: Vec<&str> = mode.iter().copied().chain(["--frames", "1..2"]).collect();
+        ok(render("cornell-anim", &args, &dir.join(format!("{tag}.exr"))));
+        for frame in 1..3 {
+            let plain = filtrace_io::read_exr(dir.join(format!("plain.{frame:04}.exr"))).unwrap();
+            let filtered = filtrace_io::read_exr(dir.join(format!("{tag}.{frame:04}.exr"))).unwrap();
+            for ch in channels {
+                let got = filtered.channel(ch).unwrap_or_else(|| {
+                    panic!("{mode:?}: frame {frame} lacks {ch}: {:?}", filtered.channel_names())
+                });
+                let want = plain.channel(ch).unwrap();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(got), bits(want), "{mode:?}: frame {frame}, {ch}");
+            }
+            let motion = filtered.channel("motion.X").unwrap();
+            assert!(motion.iter().any(|&m| m != 0.0), "{mode:?}: frame {frame}: the camera moves");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn resume_keeps_finished_frames_and_renders_missing_corrupt_or_different_ones_again() {
     let dir = temp_dir("resume");
     let out = dir.join("r.exr");

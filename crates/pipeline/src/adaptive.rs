@@ -8,7 +8,7 @@
 //! 1. **G-buffer pre-pass** — the guide rays' first hits (normal, world position) are
 //!    traced with no indirect path: the same eye rays as the guide pass, so the importance
 //!    map sees exactly the geometry the filter will see. Costs one primary ray per pixel
-//!    ([`PathSource::first_hit`]).
+//!    ([`PathSource::first_hits`], a row per batch).
 //! 2. **importance + apportionment** — [`filtrace_adaptive::plan_frame`] (§4.1, §4.2): a
 //!    budget of `budget_spp · pixels` indirect paths, at least `min_spp` each.
 //! 3. **frame** — the pipeline's frame with those per-pixel counts; any filter.
@@ -18,8 +18,8 @@
 //! [`crate::RenderSource`]) and an explicit batch size
 //! ([`FilteredRenderer::set_batch_size`]) the counts are scanned into sample offsets and
 //! the paths traced batch by batch, slot-parallel, then reduced per pixel; by default the
-//! whole frame is one batch, each pixel's slot range traced in its row's task (see
-//! [`crate::pipeline`]); other sources get one call per pixel with its whole count.
+//! whole frame is one batch, each row's guide rays one [`PathSource::trace_batch`] call (see
+//! [`crate::guide`]).
 
 use filtrace_adaptive::{AdaptiveError, AdaptiveParams, SampleCounts};
 use filtrace_core::{Image, Vec2};
@@ -27,7 +27,7 @@ use rayon::prelude::*;
 
 use crate::filter::IndirectFilter;
 use crate::pipeline::{FilteredRenderer, Frame, PipelineError, PipelineSettings};
-use crate::source::{PathSource, SampleKey};
+use crate::source::{EyeRay, EyeSample, PathSource, SampleKey};
 
 /// What the adaptive scheme decided for a frame.
 #[derive(Clone, Debug)]
@@ -71,9 +71,16 @@ pub fn guide_gbuffer<S: PathSource>(source: &S, settings: &PipelineSettings) -> 
         .zip(position.data_mut().par_chunks_mut(w * 3))
         .enumerate()
         .for_each(|(y, (nrow, prow))| {
-            for x in 0..w {
-                let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: settings.seed };
-                let e = source.first_hit(key, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+            // The row's guide rays as one batch (`PathSource::first_hits`).
+            let rays: Vec<EyeRay> = (0..w)
+                .map(|x| {
+                    let key = SampleKey { x: x as u32, y: y as u32, sample: 0, seed: settings.seed };
+                    EyeRay { key, film: Vec2::new(x as f32 + 0.5, y as f32 + 0.5), paths: 0 }
+                })
+                .collect();
+            let mut hits = vec![EyeSample::default(); w];
+            source.first_hits(&rays, &mut hits);
+            for (x, e) in hits.iter().enumerate() {
                 if let Some(hit) = e.hit {
                     nrow[x * 3..x * 3 + 3].copy_from_slice(&hit.normal.to_array());
                     prow[x * 3..x * 3 + 3].copy_from_slice(&e.position.to_array());
@@ -117,7 +124,6 @@ impl<S: PathSource, F: IndirectFilter> FilteredRenderer<S, F> {
 mod tests {
     use super::*;
     use crate::lookup::HitGeometry;
-    use crate::source::EyeSample;
     use crate::NoFilter;
     use filtrace_core::{Rgb, Vec3};
     use std::sync::atomic::{AtomicU64, Ordering};

@@ -7,7 +7,9 @@
 //! its indirect light from the filtered map by a geometry-aware lookup (§3.2, eqs. 3-5) and
 //! samples its direct light as usual; box reconstruction.
 //!
-//! - [`pipeline`]: the frame, pass by pass ([`FilteredRenderer::render_frame`]).
+//! - [`pipeline`]: the frame, pass by pass ([`FilteredRenderer::render_frame`]);
+//!   [`guide`] (pass 1) and [`samples`] (passes 3 and 4) trace it, [`settings`] and
+//!   [`frame`] say what is asked for and what comes out.
 //! - [`lookup`]: the geometry-aware lookup (eqs. 3-5).
 //! - [`memory`]: the bytes a frame will need, known before it is rendered.
 //! - [`source`]: what the pipeline asks of a path tracer ([`PathSource`]).
@@ -34,12 +36,17 @@
 //! ```
 
 pub mod adaptive;
+mod buffers;
 pub mod denoise_filter;
 pub mod filter;
+pub mod frame;
+pub mod guide;
 pub mod lookup;
 pub mod memory;
 pub mod pipeline;
 pub mod render_source;
+pub mod samples;
+pub mod settings;
 pub mod source;
 
 pub use denoise_filter::{filter_by_name, DenoiseFilter, FilterChoice};
@@ -50,4 +57,4 @@ pub use pipeline::{
     SAMPLE_CHUNK,
 };
 pub use render_source::RenderSource;
-pub use source::{EyeSample, PathSource, SampleKey};
+pub use source::{EyeRay, EyeSample, PathSlot, PathSource, SampleKey};

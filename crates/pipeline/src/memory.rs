@@ -10,8 +10,9 @@
 use filtrace_core::Rgb;
 use filtrace_render::memory::{bytes_of, image_bytes, output_bytes, MemoryEstimate};
 
+use crate::buffers::SampleRecord;
 use crate::lookup::HitGeometry;
-use crate::pipeline::{PipelineSettings, SampleRecord};
+use crate::settings::PipelineSettings;
 use crate::source::EyeSample;
 
 /// f32 channels of a frame's layers ([`crate::FrameImages`]): colour, noisy, direct,
@@ -33,7 +34,7 @@ pub fn frame_bytes(st: &PipelineSettings, batch_size: Option<usize>, sample_chun
         let slots = (batch as u64).min(n.saturating_mul(st.indirect_paths.max(1) as u64));
         guide += bytes_of::<EyeSample>(n) + slots * (8 + std::mem::size_of::<EyeSample>() as u64);
     }
-    let pass = st.spp.saturating_sub(1).min(crate::pipeline::SAMPLE_PASS_MAX as u32) as u64;
+    let pass = st.spp.saturating_sub(1).min(crate::settings::SAMPLE_PASS_MAX as u32) as u64;
     let records = (sample_chunk as u64).min(n.saturating_mul(pass)).max(1);
     let undo = if st.spp > 1 { image_bytes(w, h, 9) } else { 0 };
     MemoryEstimate::new(format!("a {w}x{h} filtered frame"))
@@ -63,10 +64,14 @@ pub fn adaptive_bytes(w: u32, h: u32) -> u64 {
     image_bytes(w, h, 3)
 }
 
+/// Channels of the motion AOV (`motion.X/Y`, `prev_depth.Z`, `prev_normal.X/Y/Z`).
+pub const MOTION_CHANNELS: u32 = 6;
+
 /// Channels `filtrace render --filter` writes: every frame layer but the guide's coverage
-/// (`filtered_direct` when on), and adaptive sampling's importance and path counts.
+/// (`filtered_direct` when on), adaptive sampling's importance and path counts, and the
+/// motion AOV.
 pub fn written_channels(st: &PipelineSettings, adaptive: bool) -> u32 {
-    FRAME_CHANNELS - 1 + if st.filter_direct { 3 } else { 0 } + if adaptive { 2 } else { 0 }
+    FRAME_CHANNELS - 1 + if st.filter_direct { 3 } else { 0 } + if adaptive { 2 } else { 0 } + MOTION_CHANNELS
 }
 
 /// Everything a filtered render of `st` with filter `filter` keeps alive while its EXR is
@@ -74,7 +79,7 @@ pub fn written_channels(st: &PipelineSettings, adaptive: bool) -> u32 {
 /// plan, and the EXR + PNG output ([`filtrace_render::memory::output_bytes`]).
 pub fn render_bytes(st: &PipelineSettings, filter: &str, adaptive: bool) -> MemoryEstimate {
     let (w, h) = (st.width, st.height);
-    frame_bytes(st, None, crate::pipeline::SAMPLE_CHUNK)
+    frame_bytes(st, None, crate::settings::SAMPLE_CHUNK)
         .with("filter", filter_bytes(filter, w, h))
         .with("adaptive plan", if adaptive { adaptive_bytes(w, h) } else { 0 })
         .with("EXR and PNG output", output_bytes(w, h, written_channels(st, adaptive)))

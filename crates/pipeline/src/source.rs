@@ -1,6 +1,12 @@
 //! What the filtered pipeline needs from a path tracer, as a trait: the pipeline owns the
 //! frame (which rays, which buffers, which filter); a [`PathSource`] traces one eye ray.
 //!
+//! The pipeline hands its rays over in batches ([`PathSource::trace_batch`],
+//! [`PathSource::first_hits`], [`PathSource::trace_path_batch`]: a row of guide rays, a
+//! block of further samples, a block of path slots), so that a source can trace them in
+//! SIMD lanes; every batch method must give what the per-key methods give, bit for bit, and
+//! their defaults call them one key at a time.
+//!
 //! The implementation on filtrace's own path tracer lives in [`crate::render_source`]; the
 //! tests drive the pipeline with analytic sources.
 
@@ -102,6 +108,120 @@ pub trait PathSource: Sync {
     fn resolution(&self) -> Option<(u32, u32)> {
         None
     }
+
+    /// A batch of eye rays (a row of guide rays, a block of further samples): `out[i]` is
+    /// `trace(rays[i].key, rays[i].film, rays[i].paths)` bit for bit. The pipeline hands
+    /// its rays over in batches so that a source may trace them together (in SIMD lanes,
+    /// [`crate::RenderSource`]); the default traces them one at a time ([`trace_each`]).
+    fn trace_batch(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        trace_each(self, rays, out)
+    }
+
+    /// [`first_hit`](PathSource::first_hit) of each ray of a batch (`paths` is not used).
+    fn first_hits(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.first_hit(r.key, r.film);
+        }
+    }
+
+    /// [`trace_path`](PathSource::trace_path) of each slot of a batch of the §4.3 schedule.
+    /// The default gives each run of consecutive paths of one key to
+    /// [`trace_paths`](PathSource::trace_paths) ([`trace_path_runs`]).
+    fn trace_path_batch(&self, slots: &[PathSlot], out: &mut [EyeSample]) {
+        trace_path_runs(self, slots, out)
+    }
+}
+
+/// One eye ray of a batch: the arguments of [`PathSource::trace`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeRay {
+    pub key: SampleKey,
+    pub film: Vec2,
+    pub paths: u32,
+}
+
+/// One indirect path of a guide ray: the arguments of [`PathSource::trace_path`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathSlot {
+    pub key: SampleKey,
+    pub film: Vec2,
+    pub path: u32,
+}
+
+/// Paths traced per [`PathSource::trace_paths`] call by [`trace_each`]: bounds the scratch
+/// buffer of a pixel with many paths (the sums do not depend on it).
+pub const GUIDE_PATH_CHUNK: u32 = 64;
+
+/// [`PathSource::trace_batch`] one ray at a time: a source that traces single paths gets
+/// a guide ray's paths in [`PathSource::trace_paths`] calls ([`guide_paths`]), the others
+/// one [`PathSource::trace`] call per ray. Both give what `trace` gives, bit for bit (the
+/// `trace_path` contract).
+pub fn trace_each<S: PathSource + ?Sized>(source: &S, rays: &[EyeRay], out: &mut [EyeSample]) {
+    assert_eq!(rays.len(), out.len(), "one output per ray");
+    let single = source.traces_single_paths();
+    let mut scratch = Vec::new();
+    for (o, r) in out.iter_mut().zip(rays) {
+        *o = if single && r.paths > 0 {
+            guide_paths(source, r.key, r.film, r.paths, &mut scratch)
+        } else {
+            source.trace(r.key, r.film, r.paths)
+        };
+    }
+}
+
+/// The guide ray of `key` with `count > 0` indirect paths traced one path at a time
+/// ([`PathSource::trace_paths`], at most [`GUIDE_PATH_CHUNK`] per call): the first path
+/// names the hit, the paths are summed from zero in path order and scaled by `1 / count`
+/// last, as `trace` does.
+pub fn guide_paths<S: PathSource + ?Sized>(
+    source: &S,
+    key: SampleKey,
+    film: Vec2,
+    count: u32,
+    scratch: &mut Vec<EyeSample>,
+) -> EyeSample {
+    let mut acc = EyeSample::default();
+    let mut first = 0;
+    while first < count {
+        let len = (count - first).min(GUIDE_PATH_CHUNK);
+        scratch.resize(len as usize, EyeSample::default());
+        source.trace_paths(key, film, first..first + len, scratch);
+        if first == 0 {
+            let e = scratch[0];
+            // An escaped ray is final as it is (the environment in `direct`).
+            if e.hit.is_none() {
+                return e;
+            }
+            acc = EyeSample { direct: Rgb::ZERO, indirect: Rgb::ZERO, ..e };
+        }
+        for e in scratch.iter() {
+            acc.direct += e.direct;
+            acc.indirect += e.indirect;
+        }
+        first += len;
+    }
+    let inv = 1.0 / count as f32;
+    acc.direct *= inv;
+    acc.indirect *= inv;
+    acc
+}
+
+/// [`PathSource::trace_path_batch`] as [`PathSource::trace_paths`] calls, one per run of
+/// consecutive paths of one key (a pixel's slots in a batch share its first hit).
+pub fn trace_path_runs<S: PathSource + ?Sized>(source: &S, slots: &[PathSlot], out: &mut [EyeSample]) {
+    assert_eq!(slots.len(), out.len(), "one output per slot");
+    let mut at = 0;
+    while at < slots.len() {
+        let s = slots[at];
+        let run = slots[at..]
+            .iter()
+            .enumerate()
+            .take_while(|(i, t)| t.key == s.key && t.film == s.film && t.path == s.path + *i as u32)
+            .count();
+        source.trace_paths(s.key, s.film, s.path..s.path + run as u32, &mut out[at..at + run]);
+        at += run;
+    }
 }
 
 impl<S: PathSource + ?Sized> PathSource for &S {
@@ -122,5 +242,14 @@ impl<S: PathSource + ?Sized> PathSource for &S {
     }
     fn resolution(&self) -> Option<(u32, u32)> {
         (**self).resolution()
+    }
+    fn trace_batch(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        (**self).trace_batch(rays, out)
+    }
+    fn first_hits(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        (**self).first_hits(rays, out)
+    }
+    fn trace_path_batch(&self, slots: &[PathSlot], out: &mut [EyeSample]) {
+        (**self).trace_path_batch(slots, out)
     }
 }

@@ -389,6 +389,18 @@ impl Renderer {
         true
     }
 
+    /// What the lockstep tracer reads for this renderer's scene, camera and settings (for
+    /// tracers of other rays, such as the filtered pipeline's, [`lockstep::trace_film_rays`]).
+    pub fn lockstep_context(&self) -> LockstepContext<'_> {
+        LockstepContext {
+            ctx: self.context(),
+            tables: &self.lockstep_tables,
+            params: self.path_params(),
+            camera: &self.camera,
+            queries: self.ray_queries,
+        }
+    }
+
     /// Lane utilisation of the lockstep tracer for samples `[first, first + count)` of every
     /// pixel (renders on the current thread into a scratch film).
     pub fn lane_stats(&self, first: u32, count: u32) -> LaneStats {

@@ -7,12 +7,18 @@
 //! would drive it). Per stage: median and mean. The machine may be shared, so the process
 //! CPU time per frame (Linux `/proc/self/stat`) is reported too: `cpu_ms / threads` is the
 //! frame time the threads would take with the cores to themselves.
+//!
+//! `--trace lockstep` (the default) traces the guide rays and further samples on the SIMD
+//! lockstep tracer, `--trace scalar` one key at a time (the reference; same frame bit for
+//! bit). With the lockstep tracer, the lane utilisation of the timed frames is reported: a
+//! deterministic measure (a function of the scene, resolution and seed) beside the timings.
 
 use filtrace_pipeline::{FilterChoice, FrameTimings, PipelineSettings};
 use serde::Serialize;
 use std::io::Write;
 
 use super::render::{parse_resolution, Resolution};
+use super::render_args::TraceArg;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -44,6 +50,10 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub threads: Option<u32>,
+    /// How the guide rays and further samples are traced: `lockstep` (SIMD lanes, the
+    /// default) or `scalar` (one key at a time, the reference). Same frame either way.
+    #[arg(long, value_enum, default_value = "lockstep")]
+    pub trace: TraceArg,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -66,6 +76,11 @@ struct Row {
     /// `1000 / (cpu_ms / threads)`: frames per second with every thread on its own core.
     fps_if_cores_free: Option<f64>,
     stages: Vec<StageStats>,
+    /// Lane slots used over lane slots paid for by the lockstep tracer in the timed frames
+    /// (`LaneStats::mean_utilisation`); `None` with `--trace scalar`.
+    lane_utilisation: Option<f64>,
+    /// Groups of eight lanes run through a bounce per timed frame (lockstep only).
+    lane_groups_per_frame: Option<f64>,
 }
 
 #[derive(Serialize)]
@@ -76,6 +91,8 @@ struct Report {
     spp: u32,
     indirect_paths: u32,
     max_depth: i32,
+    /// `lockstep` or `scalar`.
+    trace: String,
     threads: usize,
     triangles: usize,
     rows: Vec<Row>,
@@ -116,11 +133,21 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for f in &a.filter {
         let choice = FilterChoice { preset: a.filter_preset.clone(), ..FilterChoice::named(f) };
         let mut p = pool.install(|| {
-            super::render_filtered::build_pipeline(scene.clone(), settings.clone(), a.max_depth, &choice)
+            let trace = Some(a.trace.mode());
+            super::render_filtered::build_pipeline_traced(
+                scene.clone(),
+                settings.clone(),
+                a.max_depth,
+                &choice,
+                trace,
+            )
         })?;
         let mut times: Vec<FrameTimings> = Vec::new();
         let mut cpu = Vec::new();
         for i in 0..a.warmup + a.frames {
+            if i == a.warmup {
+                p.source().take_lane_stats();
+            }
             let c0 = process_cpu_ms();
             let t =
                 pool.install(|| p.render_frame().map(|fr| fr.timings)).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -144,6 +171,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             stats("total", col(|t| t.total_ms)),
         ];
         let fps_median = 1000.0 / stages[4].median_ms.max(1e-9);
+        let lanes = p.source().take_lane_stats();
+        let lockstep = p.source().lane_code().is_some();
         rows.push(Row {
             filter: p.filter_mut().label(),
             frames: a.frames,
@@ -151,6 +180,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             cpu_ms_mean,
             fps_if_cores_free,
             stages,
+            lane_utilisation: lockstep.then(|| lanes.mean_utilisation()),
+            lane_groups_per_frame: lockstep.then(|| lanes.bounces as f64 / a.frames as f64),
         });
     }
     let report = Report {
@@ -160,6 +191,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         spp: a.spp,
         indirect_paths: a.indirect_paths,
         max_depth: a.max_depth,
+        trace: format!("{:?}", a.trace).to_lowercase(),
         threads,
         triangles,
         rows,
@@ -171,17 +203,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     writeln!(
         out,
-        "filtered pipeline: {} {}x{}, {} spp, {} indirect path(s), max depth {}, {} threads, {} triangles, median of {} frames",
-        report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, threads, triangles, a.frames
+        "filtered pipeline: {} {}x{}, {} spp, {} indirect path(s), max depth {}, {} tracer, {} threads, {} triangles, median of {} frames",
+        report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, report.trace, threads, triangles, a.frames
     )?;
     writeln!(out)?;
-    writeln!(out, "| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free |")?;
-    writeln!(out, "|---|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    writeln!(out, "| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free | lanes used |")?;
+    writeln!(out, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     for r in &report.rows {
         let m: Vec<f64> = r.stages.iter().map(|s| s.median_ms).collect();
         writeln!(
             out,
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {} |",
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {} | {} |",
             r.filter,
             m[0],
             m[1],
@@ -190,7 +222,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             m[4],
             r.fps_median,
             r.cpu_ms_mean.map_or("-".into(), |c| format!("{c:.0}")),
-            r.fps_if_cores_free.map_or("-".into(), |f| format!("{f:.1}"))
+            r.fps_if_cores_free.map_or("-".into(), |f| format!("{f:.1}")),
+            r.lane_utilisation.map_or("-".into(), |u| format!("{:.1} %", 100.0 * u))
         )?;
     }
     Ok(out.flush()?)

@@ -87,6 +87,18 @@ pub fn build_pipeline(
     max_depth: i32,
     filter: &FilterChoice,
 ) -> anyhow::Result<Pipeline> {
+    build_pipeline_traced(scene, settings, max_depth, filter, None)
+}
+
+/// [`build_pipeline`] whose source traces its batches as `trace` says (`--trace`; `None`:
+/// the renderer's default, the lockstep tracer). The frame is the same bit for bit.
+pub fn build_pipeline_traced(
+    scene: filtrace_scene::Scene,
+    settings: PipelineSettings,
+    max_depth: i32,
+    filter: &FilterChoice,
+    trace: Option<filtrace_render::TraceMode>,
+) -> anyhow::Result<Pipeline> {
     let rs = filtrace_render::RenderSettings {
         width: settings.width,
         height: settings.height,
@@ -94,7 +106,10 @@ pub fn build_pipeline(
         max_depth,
         seed: settings.seed,
     };
-    let renderer = Renderer::new(scene, rs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut renderer = Renderer::new(scene, rs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(t) = trace {
+        renderer = renderer.with_trace_mode(t);
+    }
     let source = RenderSource::new(renderer);
     let f = filter.build(Some(source.scene_scale())).map_err(|e| anyhow::anyhow!("{e}"))?;
     FilteredRenderer::new(source, f, settings).map_err(|e| anyhow::anyhow!("{e}"))
@@ -193,12 +208,16 @@ impl FilteredRun<'_> {
             Err(e) => return Err(anyhow::anyhow!("{e}")),
             Ok(()) => {}
         }
-        let extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
+        // The motion AOV of the frame's camera and instances, as a plain frame writes it
+        // (`motion.X/Y`, `prev_depth.Z`, `prev_normal.X/Y/Z`; zero for a still frame).
+        let motion = pipeline.source().renderer().motion_aov();
+        let mut extra: Vec<(&str, &[&str], &filtrace_core::Image)> = match &adaptive_layers {
             Some((importance, counts)) => {
                 vec![("importance", &["Y"], importance), ("indirect_paths", &["Y"], counts)]
             }
             None => vec![],
         };
+        extra.extend(motion.layers());
         let frame = pipeline.last_frame();
         let settings = pipeline.settings();
         let cancelled = self.cancel.load(Ordering::SeqCst);
@@ -242,7 +261,9 @@ pub fn run(common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) ->
     }
     test_hook("loaded", ctrlc.flag());
     let pool = common.thread_pool()?;
-    let mut pipeline = pool.install(|| build_pipeline(scene, settings, common.max_depth, &choice))?;
+    let trace = common.trace.map(|t| t.mode());
+    let mut pipeline =
+        pool.install(|| build_pipeline_traced(scene, settings, common.max_depth, &choice, trace))?;
     test_hook("built", ctrlc.flag());
     pipeline.set_cancel(Some(ctrlc.flag().clone()));
     ctrlc.arm();

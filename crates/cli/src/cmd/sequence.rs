@@ -21,7 +21,7 @@ use std::time::Instant;
 use super::frame_source::FrameSource;
 use super::preview::write_preview;
 use super::render_args::CommonArgs;
-use super::render_filtered::{build_pipeline, AdaptiveArgs, FilterArgs, FilteredRun, Pipeline};
+use super::render_filtered::{build_pipeline_traced, AdaptiveArgs, FilterArgs, FilteredRun, Pipeline};
 use super::render_plain::{build_renderer, LoadReport, PlainRun};
 use super::render_session::{check_memory, multi_progress, progress_bar, test_hook, CtrlC, Interrupted};
 use super::sequence_files::{frame_path, preview_path, FrameStamp};
@@ -245,9 +245,10 @@ pub fn run(
                     Box::new(build_renderer(scene, common, &sequence.pool)?),
                 ),
                 Some((settings, choice)) => {
-                    let mut p = sequence
-                        .pool
-                        .install(|| build_pipeline(scene, settings, common.max_depth, &choice))?;
+                    let trace = common.trace.map(|t| t.mode());
+                    let mut p = sequence.pool.install(|| {
+                        build_pipeline_traced(scene, settings, common.max_depth, &choice, trace)
+                    })?;
                     p.set_cancel(Some(flag.clone()));
                     let run = FilteredRun {
                         common,

@@ -26,6 +26,11 @@
 //! Since all lanes start together and every stage is per vertex, the vertex index is the
 //! same in all lanes, and so are the sampler slots.
 //!
+//! The same pools run the filtered pipeline's rays ([`trace_film_rays`]): camera rays
+//! through given film positions in any pixels ([`PoolCameras::Given`]), paths of any
+//! [`PathParams`] from their hits or first hits alone, under the same contract
+//! (`filtrace-pipeline`'s `tests/lockstep_source.rs`).
+//!
 //! Paths that end (miss, roulette, zero throughput, depth limit) leave the pool; the others
 //! are moved to the front of it (stream compaction: without it, the lanes of ended paths
 //! stayed idle until the slowest path of their group ended, and 43 % of the lane slots
@@ -36,7 +41,7 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{bits, from_bits, load8_u32, per_lane, F8, LANES, M8, U8, V8};
+use super::lanes::{bits, from_bits, load8, load8_u32, per_lane, F8, LANES, M8, U8, V8};
 use super::path::visible_surface;
 use super::pool::{PathLanes, Pool, POOL};
 use super::sampler8::Sampler8;
@@ -49,9 +54,11 @@ use filtrace_core::Rgb;
 use shade::shade;
 use surf8::{from_hits, lanes_of, Surf8};
 
+mod film_rays;
 mod shade;
 mod surf8;
 mod tables;
+pub use film_rays::{trace_film_rays, FilmRay, LaneCode};
 pub use tables::LockstepTables;
 
 /// Longest path (in vertices) [`LaneStats`] tells apart; longer ones count as the last.
@@ -137,6 +144,35 @@ impl LockstepContext<'_> {
     }
 }
 
+/// Where the camera rays of a pool go and what is traced from their hits.
+#[derive(Clone, Copy)]
+pub enum PoolCameras<'a> {
+    /// The renderer's sample `index` of pixels `x0..x0 + n` of row `y`: through the pixel
+    /// centre at sample 0, else at the sampler's jitter (slot [`SLOT_PIXEL`]); paths from
+    /// every hit; the visible surface at sample 0 (the all-zero record on a miss).
+    Row { x0: u32, y: u32 },
+    /// Given film positions (the filtered pipeline's eye rays); the visible surface of every
+    /// lane that hit (`None` on a miss); paths from the hits when `paths`, else first hits
+    /// only.
+    Given { films: &'a FilmLanes, paths: bool },
+}
+
+/// Film positions of a pool's lanes as [`PinholeCamera::generate_ray`] takes them: pixel
+/// `(px, py)` (as `f32`) and the offset `(ox, oy)` in it.
+#[derive(Clone, Copy, Debug)]
+pub struct FilmLanes {
+    pub px: [f32; POOL],
+    pub py: [f32; POOL],
+    pub ox: [f32; POOL],
+    pub oy: [f32; POOL],
+}
+
+impl Default for FilmLanes {
+    fn default() -> Self {
+        FilmLanes { px: [0.0; POOL], py: [0.0; POOL], ox: [0.0; POOL], oy: [0.0; POOL] }
+    }
+}
+
 /// Traces sample `index` of the `n` pixels `(x0 + j, y)`, `j < n <= POOL`, of one image
 /// row into `out[j]`; `keys[j]` is pixel `j`'s [`filtrace_core::sampler::Sampler::pixel_key`].
 /// `out[j]` equals `Renderer::trace_sample(x0 + j, y, index)` bit for bit (visible surface
@@ -156,6 +192,23 @@ pub fn trace_pool<const AVX2: bool>(
     stats: &mut LaneStats,
     out: &mut [CameraSample; POOL],
 ) {
+    trace_pool_at::<AVX2>(lc, PoolCameras::Row { x0, y }, keys, n, index, pool, stats, out);
+}
+
+/// [`trace_pool`] with the camera rays of `cams`: lane `j < n` is the pixel whose sampler
+/// key is `keys[j]` at sample `index`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn trace_pool_at<const AVX2: bool>(
+    lc: &LockstepContext,
+    cams: PoolCameras,
+    keys: &[u32; POOL],
+    n: usize,
+    index: u32,
+    pool: &mut Pool,
+    stats: &mut LaneStats,
+    out: &mut [CameraSample; POOL],
+) {
     debug_assert!(n <= POOL);
     *out = [CameraSample::default(); POOL];
     pool.clear();
@@ -164,7 +217,7 @@ pub fn trace_pool<const AVX2: bool>(
     let mut si = Surf8::<AVX2>::default();
     for first in (0..n).step_by(LANES) {
         let lanes = from_bits::<AVX2>(((1u32 << (n - first).min(LANES)) - 1) as u8);
-        camera_group(lc, x0, y, keys, first, lanes, index, pool, &mut si, stats, out);
+        camera_group(lc, cams, keys, first, lanes, index, pool, &mut si, stats, out);
     }
     let mut vertex = 0u32;
     while !pool.is_empty() {
@@ -183,8 +236,7 @@ pub fn trace_pool<const AVX2: bool>(
 #[inline(always)]
 fn camera_group<const AVX2: bool>(
     lc: &LockstepContext,
-    x0: u32,
-    y: u32,
+    cams: PoolCameras,
     keys: &[u32; POOL],
     first: usize,
     lanes: M8<AVX2>,
@@ -197,16 +249,24 @@ fn camera_group<const AVX2: bool>(
     let ctx = &lc.ctx;
     let cam = lc.camera;
     let key = load8_u32::<AVX2>(keys, first);
-    let sampler = Sampler8::<AVX2>::from_keys(key, index);
     stats.groups += 1;
     stats.camera_lanes += lanes.count() as u64;
 
-    // Camera rays: `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
-    let (jx, jy) = sampler.next_2d(SLOT_PIXEL);
-    let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
-    let px = F8::<AVX2>::from_array(per_lane(|i| (x0 as usize + first + i) as f32));
+    // Camera rays: `PinholeCamera::generate_ray` at the film positions of `cams`.
+    let (px, py, ox, oy) = match cams {
+        PoolCameras::Row { x0, y } => {
+            // `PinholeCamera::sample_ray` (sample 0 through the pixel centre).
+            let (jx, jy) = Sampler8::<AVX2>::from_keys(key, index).next_2d(SLOT_PIXEL);
+            let (ox, oy) = if index == 0 { (F8::splat(0.5), F8::splat(0.5)) } else { (jx, jy) };
+            let px = F8::<AVX2>::from_array(per_lane(|i| (x0 as usize + first + i) as f32));
+            (px, F8::splat(y as f32), ox, oy)
+        }
+        PoolCameras::Given { films: f, .. } => {
+            (load8(&f.px, first), load8(&f.py, first), load8(&f.ox, first), load8(&f.oy, first))
+        }
+    };
     let sx = (px + ox) * F8::splat(cam.two_over_size.x) - F8::splat(1.0);
-    let sy = F8::splat(1.0) - (F8::splat(y as f32) + oy) * F8::splat(cam.two_over_size.y);
+    let sy = F8::splat(1.0) - (py + oy) * F8::splat(cam.two_over_size.y);
     let dir =
         (V8::splat(cam.forward) + V8::splat(cam.right_half) * sx + V8::splat(cam.up_half) * sy).normalize();
     let rays = RayPacket {
@@ -217,8 +277,12 @@ fn camera_group<const AVX2: bool>(
     };
     let hits = lc.intersect(&rays, lanes);
     let hit = from_hits(lc, &dir, &hits, si);
-    let want_surface = index == 0;
-    if want_surface {
+    // (visible surface of a hit, all-zero record of a miss, paths from the hits)
+    let (on_hit, on_miss, paths) = match cams {
+        PoolCameras::Row { .. } => (index == 0, index == 0, true),
+        PoolCameras::Given { paths, .. } => (true, false, paths),
+    };
+    if on_hit {
         for i in lanes_of(lanes & hit) {
             out[first + i].surface = Some(visible_surface(ctx, &si.lane(i)));
         }
@@ -226,7 +290,10 @@ fn camera_group<const AVX2: bool>(
     for i in lanes_of(lanes & !hit) {
         let o = &mut out[first + i];
         o.radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
-        o.surface = want_surface.then(VisibleSurface::default);
+        o.surface = on_miss.then(VisibleSurface::default);
+    }
+    if !paths {
+        return;
     }
     let paths = PathLanes {
         beta: V8::splat(Rgb::ONE),

@@ -1,32 +1,70 @@
 //! [`PathSource`] on filtrace's own path tracer ([`filtrace_render::Renderer`]): the camera,
-//! the scene's acceleration structure and lights, and the integrator's
-//! `trace_from_hit` (direct and indirect apart) and `direct_light` entry points.
+//! the scene's acceleration structure and lights, and the integrator's `trace_from_hit`
+//! (direct and indirect apart). A guide ray's path is `trace_from_hit` from its hit; a
+//! further eye sample's is the same with two segments ([`eye_sample_params`]: emission and
+//! direct light, both strategies, MIS).
+//!
+//! Two ways of running the same paths, chosen by the renderer's
+//! [`TraceMode`](filtrace_render::TraceMode): the per-key methods (`trace`, `trace_paths`,
+//! `first_hit`) run the scalar integrator, the reference; the batch methods run the
+//! lockstep tracer ([`lanes`], `filtrace_render::integrator::lockstep`) on the batches the
+//! pipeline hands over, bit for bit the same (`tests/lockstep_source.rs`), or the scalar
+//! code one key at a time in [`TraceMode::Scalar`](filtrace_render::TraceMode::Scalar).
 
 use std::ops::Range;
+use std::sync::Mutex;
 
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{Rgb, Vec2, Vec3};
-use filtrace_render::integrator::{path, SLOT_PIXEL};
-use filtrace_render::Renderer;
+use filtrace_render::integrator::lockstep::{LaneCode, LaneStats};
+use filtrace_render::integrator::{path, PathParams};
+use filtrace_render::{Renderer, TraceMode};
 
 use crate::lookup::HitGeometry;
-use crate::source::{EyeSample, PathSource, SampleKey};
+use crate::source::{self, EyeRay, EyeSample, PathSlot, PathSource, SampleKey};
+
+mod lanes;
 
 /// Sampler index of further eye sample `s` (>= 1) of a pixel. The guide ray's indirect
 /// paths use indices `0..paths`; further samples start far above so that their light
 /// samples never repeat the guide's.
 pub const EYE_SAMPLE_INDEX_BASE: u32 = 1 << 24;
 
+/// The paths of further eye samples: the first two segments of the renderer's paths
+/// (`max_depth` 2, or 1 when the renderer's is 1), without Russian roulette before them, so
+/// that `trace_from_hit` returns the emission at the hit plus one light sample and one BSDF
+/// sample, MIS-weighted, all in `direct`.
+pub fn eye_sample_params(p: PathParams) -> PathParams {
+    PathParams { max_depth: if p.allows(2) { 2 } else { p.max_depth }, rr_depth: p.rr_depth.max(3) }
+}
+
 /// The path tracer as seen by the pipeline.
 pub struct RenderSource {
     renderer: Renderer,
+    /// Lane utilisation of the lockstep batches traced so far.
+    lane_stats: Mutex<LaneStats>,
 }
 
 impl RenderSource {
     /// `renderer`'s resolution is the frame's; its `max_depth` bounds every path (Mitsuba
-    /// convention: 2 = direct light only, 3 = one indirect bounce).
+    /// convention: 2 = direct light only, 3 = one indirect bounce); its trace mode says
+    /// whether batches run in lockstep.
     pub fn new(renderer: Renderer) -> Self {
-        Self { renderer }
+        Self { renderer, lane_stats: Mutex::new(LaneStats::default()) }
+    }
+
+    /// The lane code the batches run on; `None`: the scalar code, one key at a time.
+    pub fn lane_code(&self) -> Option<LaneCode> {
+        match self.renderer.trace_mode() {
+            TraceMode::Lockstep => Some(LaneCode::Best),
+            TraceMode::LockstepPortable => Some(LaneCode::Portable),
+            TraceMode::Scalar => None,
+        }
+    }
+
+    /// Lane utilisation of the lockstep batches traced since the last call (then reset).
+    pub fn take_lane_stats(&self) -> LaneStats {
+        std::mem::take(&mut *self.lane_stats.lock().unwrap_or_else(|e| e.into_inner()))
     }
     pub fn renderer(&self) -> &Renderer {
         &self.renderer
@@ -65,15 +103,11 @@ impl PathSource for RenderSource {
         let vs = path::visible_surface(&ctx, &si);
         let hit = Some(HitGeometry { normal: vs.normal, depth: vs.depth });
         let base = EyeSample { hit, albedo: vs.albedo, position: vs.position, ..Default::default() };
-        let emitted = ctx.emitted(&si);
         if indirect_paths == 0 {
             // A further eye sample: emission and direct light only (§3.1).
-            let index = EYE_SAMPLE_INDEX_BASE + key.sample;
-            let mut sampler = Sampler::new(key.x, key.y, index, key.seed);
-            sampler.set_slot(SLOT_PIXEL);
-            let direct =
-                if params.allows(2) { path::direct_light(&ctx, &si, &mut sampler) } else { Rgb::ZERO };
-            return EyeSample { direct: finite_or_zero(emitted + direct), ..base };
+            let mut sampler = Sampler::new(key.x, key.y, EYE_SAMPLE_INDEX_BASE + key.sample, key.seed);
+            let split = path::trace_from_hit(&ctx, &eye_sample_params(params), &si, &mut sampler);
+            return EyeSample { direct: finite_or_zero(split.direct), ..base };
         }
         // The guide ray: `indirect_paths` paths from its hit, direct and indirect apart
         // (`trace_path` is one term of this sum: keep them in step).
@@ -104,6 +138,31 @@ impl PathSource for RenderSource {
 
     fn traces_single_paths(&self) -> bool {
         true
+    }
+
+    fn trace_batch(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        match self.lanes() {
+            Some(lanes) => lanes.trace_batch(rays, out),
+            None => source::trace_each(self, rays, out),
+        }
+    }
+
+    fn first_hits(&self, rays: &[EyeRay], out: &mut [EyeSample]) {
+        match self.lanes() {
+            Some(lanes) => lanes.first_hits(rays, out),
+            None => {
+                for (o, r) in out.iter_mut().zip(rays) {
+                    *o = self.first_hit(r.key, r.film);
+                }
+            }
+        }
+    }
+
+    fn trace_path_batch(&self, slots: &[PathSlot], out: &mut [EyeSample]) {
+        match self.lanes() {
+            Some(lanes) => lanes.trace_path_batch(slots, out),
+            None => source::trace_path_runs(self, slots, out),
+        }
     }
 
     fn trace_path(&self, key: SampleKey, film: Vec2, path_index: u32) -> EyeSample {
@@ -137,6 +196,19 @@ impl PathSource for RenderSource {
             };
         }
     }
+}
+
+impl RenderSource {
+    fn lanes(&self) -> Option<lanes::LaneTracer<'_>> {
+        let code = self.lane_code()?;
+        Some(lanes::LaneTracer { renderer: &self.renderer, code, stats: &self.lane_stats })
+    }
+}
+
+/// The hit record of an eye ray's visible surface.
+fn surface_sample(vs: &filtrace_render::film::VisibleSurface) -> EyeSample {
+    let hit = Some(HitGeometry { normal: vs.normal, depth: vs.depth });
+    EyeSample { hit, albedo: vs.albedo, position: vs.position, ..Default::default() }
 }
 
 fn finite_or_zero(c: Rgb) -> Rgb {

@@ -119,6 +119,16 @@ pub trait Backend {
         method: &MethodSpec,
         spp: u32,
     ) -> Result<MethodRun, String>;
+    /// Identifies what the VPL ground truth of `scene` depends on beyond the spec (the
+    /// scene's content and the VPLs the renderer makes), for its cache key.
+    fn ground_truth_fingerprint(
+        &mut self,
+        spec: &ExperimentSpec,
+        scene: &SceneSpec,
+    ) -> Result<String, String> {
+        let _ = spec;
+        self.scene_fingerprint(scene)
+    }
     /// The exhaustive VPL sum over camera samples `0..spp` with the VPLs every method of
     /// `spec` uses (`[reference] ground_truth = "vpl"`); called with increasing `spp`.
     /// `previous` is the same sum over `0..k` for some `k < spp` when the experiment has

@@ -94,6 +94,18 @@ impl Backend for PipelineBackend {
         Ok(f)
     }
 
+    fn ground_truth_fingerprint(
+        &mut self,
+        spec: &ExperimentSpec,
+        scene: &SceneSpec,
+    ) -> Result<String, String> {
+        // The VPLs too: a renderer that makes other VPLs never meets a stale ground truth.
+        let f = self.scene_fingerprint(scene)?;
+        let (scenes, dir) = (&mut self.scenes, &self.spec_dir);
+        let vpls = self.vpl.vpl_fingerprint(spec, &scene.name, || cached_scene(scenes, dir, &scene.name))?;
+        Ok(format!("{f}-{vpls:016x}"))
+    }
+
     fn render_ground_truth(
         &mut self,
         spec: &ExperimentSpec,

@@ -137,6 +137,16 @@ impl VplBackend {
         Ok(self.scenes.get_mut(name).expect("inserted"))
     }
 
+    /// The fingerprint of the VPLs of `name` (those of every method and the ground truth).
+    pub fn vpl_fingerprint(
+        &mut self,
+        spec: &ExperimentSpec,
+        name: &str,
+        scene: impl FnOnce() -> Result<Scene, String>,
+    ) -> Result<u64, String> {
+        Ok(self.state(spec, name, scene)?.vpls)
+    }
+
     /// The exhaustive VPL sum over camera samples `0..spp`, extending the running sum, or
     /// `previous` (the sum over `0..k`) when that is further along.
     pub fn ground_truth(

@@ -129,7 +129,7 @@ impl Run<'_> {
         spp: u32,
         previous: Option<(u32, &Image)>,
     ) -> Result<(Image, bool), String> {
-        let fingerprint = self.backend.scene_fingerprint(scene)?;
+        let fingerprint = self.backend.ground_truth_fingerprint(self.spec, scene)?;
         let key = self.spec.ground_truth_key(scene, spp, &self.backend.tag(), &fingerprint);
         let path = self.cache.join(format!("{}-vpl-gt-{key}.pfm", file_stem(&scene.name)));
         if let Some(img) = self.cached(&path) {

@@ -1,4 +1,4 @@
-//! The work of [`super::run_experiment`]: references (a file, the cache or a render; per
+//! [`run_experiment`]: references (a file, the cache or a render; per
 //! sample count for the VPL ground truth) and the cells (a method at a sample count, its
 //! images and errors, plus its OIDN-denoised twin).
 
@@ -6,14 +6,14 @@ use std::path::{Path, PathBuf};
 
 use filtrace_core::Image;
 
-use super::{
-    default_crop, errors, file_stem, Backend, Entry, ExperimentSpec, MethodRun, MethodSpec, RayClock,
-    SceneResult, SceneSpec,
+use super::results::{
+    default_crop, errors, file_stem, Backend, Entry, MethodRun, Progress, RayClock, Results, SceneResult,
 };
+use super::spec::{ExperimentSpec, MethodSpec, SceneSpec};
 use crate::figures::{write_error_map, write_png, zoomed_crop};
 
 /// The state of a running experiment.
-pub(super) struct Run<'a> {
+struct Run<'a> {
     pub spec: &'a ExperimentSpec,
     pub spec_dir: &'a Path,
     pub out: &'a Path,
@@ -24,7 +24,7 @@ pub(super) struct Run<'a> {
 }
 
 /// A scene's reference: one image, or one per sample count (VPL ground truth).
-pub(super) enum References {
+enum References {
     One(Image),
     BySpp(Vec<(u32, Image)>),
 }
@@ -38,8 +38,56 @@ impl References {
     }
 }
 
+/// Runs `spec` with `backend`, writing images into `out` and the reference cache into
+/// `out/cache`. `spec_dir` resolves relative paths of the spec. Does not write the report
+/// (see [`crate::report::write_all`]).
+pub fn run_experiment(
+    spec: &ExperimentSpec,
+    spec_dir: &Path,
+    out: &Path,
+    backend: &mut dyn Backend,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Results, String> {
+    run_experiment_with_cache(spec, spec_dir, out, &out.join("cache"), backend, progress)
+}
+
+/// [`run_experiment`] with the reference cache in `cache` (shared by several specs).
+pub fn run_experiment_with_cache(
+    spec: &ExperimentSpec,
+    spec_dir: &Path,
+    out: &Path,
+    cache: &Path,
+    backend: &mut dyn Backend,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Results, String> {
+    spec.validate()?;
+    std::fs::create_dir_all(cache).map_err(|e| format!("{}: {e}", cache.display()))?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let total = spec.scenes.len() * (1 + spec.methods.len() * spec.spp.len());
+    let mut results = Results { spec: spec.clone(), scenes: vec![], entries: vec![], notes: vec![] };
+    let oidn_exe = find_oidn(spec, spec_dir, &mut results.notes);
+    let mut run = Run { spec, spec_dir, out, cache, backend, oidn: oidn_exe, done: 0 };
+    for scene in &spec.scenes {
+        progress(Progress { done: run.done, total, message: &format!("{}: reference", scene.name) });
+        let (scene_result, references) = run.references(scene)?;
+        run.done += 1;
+        for method in &spec.methods {
+            for &spp in &spec.spp {
+                let msg = format!("{}: {} at {spp} spp", scene.name, method.name);
+                progress(Progress { done: run.done, total, message: &msg });
+                let reference = references.at(spp);
+                results.entries.extend(run.cell(scene, &scene_result, method, spp, reference)?);
+                run.done += 1;
+            }
+        }
+        results.scenes.push(scene_result);
+    }
+    progress(Progress { done: run.done, total, message: "done" });
+    Ok(results)
+}
+
 /// The OIDN executable when the spec asks for it; notes say what happened.
-pub(super) fn find_oidn(spec: &ExperimentSpec, spec_dir: &Path, notes: &mut Vec<String>) -> Option<PathBuf> {
+fn find_oidn(spec: &ExperimentSpec, spec_dir: &Path, notes: &mut Vec<String>) -> Option<PathBuf> {
     if !spec.oidn {
         if !spec.is_vpl_ground_truth() {
             notes.push(crate::oidn::HOW_TO_ENABLE.to_string());

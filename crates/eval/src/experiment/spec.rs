@@ -6,9 +6,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 
-use super::fnv1a64;
 pub use super::vpl_spec::{
     GroundTruth, Metric, VplMethod, VplSampler, VplSpec, DEFAULT_CACHE_POINTS, DEFAULT_DISTRIBUTIONS,
     DEFAULT_NEIGHBOURS, MAX_COUNT, MAX_DISTRIBUTIONS, MAX_NEIGHBOURS,
@@ -386,6 +385,16 @@ impl ExperimentSpec {
     }
 }
 
+/// FNV-1a, 64 bit: stable across runs and platforms (unlike `DefaultHasher`).
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
 /// 1-based line of byte `offset` in `text`.
 pub fn line_of_offset(text: &str, offset: usize) -> usize {
     1 + text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count()
@@ -419,18 +428,4 @@ pub fn locate(text: &str, at: At) -> Option<usize> {
         }
     };
     found.map(|i| i + 1)
-}
-
-/// `Option<u32>` in `lo..=hi`, for `deserialize_with`: the error carries the value's span.
-pub(super) fn de_range<'de, D: Deserializer<'de>>(
-    d: D,
-    what: &str,
-    lo: u32,
-    hi: u32,
-) -> Result<Option<u32>, D::Error> {
-    let v = i64::deserialize(d)?;
-    if v < lo as i64 || v > hi as i64 {
-        return Err(serde::de::Error::custom(format!("{what} = {v} (expected {lo}..={hi})")));
-    }
-    Ok(Some(v as u32))
 }

@@ -5,8 +5,6 @@
 
 use serde::{Deserialize, Deserializer, Serialize};
 
-use super::spec::de_range;
-
 /// Most cache records interpolated per shading point (`filtrace_vpl::cache::MAX_NEIGHBOURS`).
 pub const MAX_NEIGHBOURS: u32 = 4;
 /// Most distributions of a record: full, unoccluded, bounded, uniform.
@@ -172,4 +170,13 @@ fn de_clamp<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f32>, D::Error> {
         )));
     }
     Ok(Some(v as f32))
+}
+
+/// `Option<u32>` in `lo..=hi`, for `deserialize_with`: the error carries the value's span.
+fn de_range<'de, D: Deserializer<'de>>(d: D, what: &str, lo: u32, hi: u32) -> Result<Option<u32>, D::Error> {
+    let v = i64::deserialize(d)?;
+    if v < lo as i64 || v > hi as i64 {
+        return Err(serde::de::Error::custom(format!("{what} = {v} (expected {lo}..={hi})")));
+    }
+    Ok(Some(v as u32))
 }

@@ -11,4 +11,5 @@ pub mod experiment;
 pub mod figures;
 pub mod oidn;
 pub mod pfm;
+pub mod plots;
 pub mod report;

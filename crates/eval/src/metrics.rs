@@ -7,6 +7,7 @@
 //! |---|---|---|
 //! | [`mse`] | linear values | mean over pixels and channels of `(x - r)^2` |
 //! | [`rel_mse`] | linear values | mean over pixels and channels of `(x - r)^2 / (r^2 + 0.01)` (Rousselle et al. 2011's relative MSE; ε = [`REL_MSE_EPSILON`]) |
+//! | [`rel_mse_clamped`] | values clamped to [0, 1] | `Σ (x - r)^2 / Σ r^2` over pixels and channels: the relMSE of the importance-caching thesis (6.1.2), a ratio of means |
 //! | [`psnr`] | values clamped to [0, 1] | `10 log10(1 / MSE_clamped)`: the peak is 1.0, the white of the PNG. A fixed peak makes numbers comparable across references (the reference maximum of a scene with a visible light is set by the light, not the image); `+inf` for identical images |
 //! | [`ssim`] | luma of the displayed image | SSIM of Wang et al. 2004 (eq. 13) with an 11x11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03, L = 1, on `Y' = 0.2126 R' + 0.7152 G' + 0.0722 B'` where `R'G'B'` are the clamped sRGB-encoded values (the PNG); edges are clamped (replicated), so every pixel has a window; the mean of the SSIM map |
 //! | [`flip`] | the displayed image | LDR-ꟻLIP (Andersson et al. 2020) on the 8-bit sRGB images that [`filtrace_io::write_png`] would write, 67 pixels per degree (0.7 m from a 0.7 m wide 4K monitor), by NVIDIA's reference implementation through the `nv-flip` crate; the mean of the FLIP map, in [0, 1] |
@@ -153,6 +154,29 @@ pub fn rel_mse_map(image: &Image, reference: &Image) -> Result<Image, MetricErro
             })
             .collect();
     Ok(Image::from_vec(p.width, p.height, 1, data).expect("one value per pixel"))
+}
+
+/// The relative MSE of the thesis (6.1.2): `E[(x − r)²] / E[r²]` over pixels and
+/// channels, on values clamped to [0, 1] (the thesis's stand-in for the display's
+/// tonemapping, which keeps a few fireflies from dominating an l² error). Unlike
+/// [`rel_mse`] it is one ratio of means, not a mean of ratios. A black reference gives 0
+/// for a black image and `+inf` otherwise.
+pub fn rel_mse_clamped(image: &Image, reference: &Image) -> Result<f64, MetricError> {
+    let p = pair(image, reference)?;
+    let clamp = |v: Vec3| v.clamp(Vec3::ZERO, Vec3::ONE).as_dvec3();
+    let (mut err, mut energy) = (0.0, 0.0);
+    for (x, r) in p.x.iter().zip(&p.r) {
+        let (x, r) = (clamp(*x), clamp(*r));
+        err += (x - r).length_squared();
+        energy += r.length_squared();
+    }
+    Ok(if energy > 0.0 {
+        err / energy
+    } else if err == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    })
 }
 
 /// PSNR in dB on values clamped to [0, 1] with peak 1.0; `+inf` for identical images.
@@ -317,6 +341,30 @@ mod tests {
 
     fn img(w: usize, h: usize, data: &[f32]) -> Image {
         Image::from_vec(w, h, 3, data.to_vec()).unwrap()
+    }
+
+    /// The thesis's relMSE by hand: clamp to [0, 1], then Σ(x − r)² / Σ r².
+    #[test]
+    fn rel_mse_clamped_matches_a_hand_computed_value() {
+        let x = img(2, 1, &[0.5, 2.0, -1.0, 0.2, 0.2, 0.2]);
+        let r = img(2, 1, &[0.25, 0.5, 0.0, 0.1, 0.3, 1.5]);
+        // Clamped x = (0.5, 1, 0), (0.2, 0.2, 0.2); clamped r = (0.25, 0.5, 0), (0.1, 0.3, 1).
+        // Σ(x − r)² = 0.0625 + 0.25 + 0 + 0.01 + 0.01 + 0.64 = 0.9725;
+        // Σ r² = 0.0625 + 0.25 + 0 + 0.01 + 0.09 + 1 = 1.4125.
+        let want = 0.9725 / 1.4125;
+        let got = rel_mse_clamped(&x, &r).unwrap();
+        assert!((got - want).abs() < 1e-7, "{got} vs {want}");
+        // Without the clamp it would differ (the 2.0, -1.0 and 1.5 count in full).
+        assert!((rel_mse(&x, &r).unwrap() - got).abs() > 0.1);
+        // Identical images: 0; a black reference: 0 for black, +inf otherwise.
+        assert_eq!(rel_mse_clamped(&x, &x).unwrap(), 0.0);
+        let black = img(2, 1, &[0.0; 6]);
+        assert_eq!(rel_mse_clamped(&black, &black).unwrap(), 0.0);
+        assert_eq!(rel_mse_clamped(&x, &black).unwrap(), f64::INFINITY);
+        // Scale-free on values inside [0, 1]: both images times 0.5, same error.
+        let (xs, rs) = (img(1, 1, &[0.2, 0.4, 0.6]), img(1, 1, &[0.3, 0.3, 0.3]));
+        let (xh, rh) = (img(1, 1, &[0.1, 0.2, 0.3]), img(1, 1, &[0.15, 0.15, 0.15]));
+        assert!((rel_mse_clamped(&xs, &rs).unwrap() - rel_mse_clamped(&xh, &rh).unwrap()).abs() < 1e-7);
     }
 
     /// A deterministic noisy image (xorshift), values in [0, scale).

@@ -5,7 +5,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::experiment::{Entry, Results};
+use crate::experiment::{Clock, Entry, Metric, Results, SceneResult};
+use crate::plots::{interpolate_log_log, log_log_plot, Series};
 
 /// Writes `report.html`, `results.json` and `results.csv` into `out` (each through
 /// `filtrace_io::write_atomic`: a failed write keeps the previous file).
@@ -38,7 +39,9 @@ fn stage_ms(e: &Entry, stage: &str) -> Option<f64> {
 /// One row per scene x method x spp; stage columns `<stage>_ms` (empty when absent).
 pub fn csv(results: &Results) -> String {
     let stages = stage_names(&results.entries);
-    let mut s = String::from("scene,method,filter,spp,mse,rel_mse,psnr,ssim,flip,nonfinite,total_ms");
+    let mut s = String::from(
+        "scene,method,filter,spp,mse,rel_mse,rel_mse_clamped,psnr,ssim,flip,nonfinite,total_ms,rays,ray_ms",
+    );
     for st in &stages {
         let _ = write!(s, ",{st}_ms");
     }
@@ -46,18 +49,21 @@ pub fn csv(results: &Results) -> String {
     for e in &results.entries {
         let _ = write!(
             s,
-            "{},{},{},{},{:e},{:e},{},{:.5},{:.5},{},{:.3}",
+            "{},{},{},{},{:e},{:e},{:e},{},{:.5},{:.5},{},{:.3},{},{}",
             csv_field(&e.scene),
             csv_field(&e.method),
             csv_field(&e.filter),
             e.spp,
             e.errors.mse,
             e.errors.rel_mse,
+            e.errors.rel_mse_clamped,
             e.errors.psnr.map_or("inf".to_string(), |p| format!("{p:.4}")),
             e.errors.ssim,
             e.errors.flip,
             e.errors.nonfinite,
-            e.total_ms
+            e.total_ms,
+            e.rays.map_or(String::new(), |r| r.rays.to_string()),
+            e.rays.map_or(String::new(), |r| format!("{:.3}", r.ray_ms))
         );
         for st in &stages {
             match stage_ms(e, st) {
@@ -83,13 +89,10 @@ fn esc(v: &str) -> String {
     v.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
-/// Series colours of the plots (colour-blind-safe Okabe-Ito palette).
-const COLOURS: [&str; 8] =
-    ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000"];
-
 /// The self-contained HTML report.
 pub fn html(r: &Results) -> String {
     let spec = &r.spec;
+    let metric = spec.metric();
     let mut h = String::new();
     let _ = write!(
         h,
@@ -99,17 +102,27 @@ td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}th{{background:#e
 .best{{font-weight:bold;background:#e6f4ea}}.grid{{display:flex;flex-wrap:wrap;gap:8px}}\
 figure{{margin:0}}figcaption{{font-size:12px;text-align:center}}img.crop{{image-rendering:pixelated;width:192px}}\
 img.full{{width:256px}}</style></head><body>\n<h1>Experiment: {name}</h1>\n<p>{w}x{hh}, max_depth {d}, seed {seed}, \
-reference {rs} spp, sample counts {spp:?}, timing: median of {rep} run(s). Error: relMSE = mean of \
-(x&minus;ref)&sup2;/(ref&sup2;+0.01); lower is better. Times are wall-clock milliseconds per frame stage.</p>\n",
+{reference}, sample counts {spp:?}, timing: median of {rep} run(s). Errors: relMSE = mean of \
+(x&minus;ref)&sup2;/(ref&sup2;+0.01); relMSE (clamped) = &Sigma;(x&minus;ref)&sup2;/&Sigma;ref&sup2; on values clamped \
+to [0, 1] (the importance-caching thesis, 6.1.2); lower is better. Plots and tables marked best use {metric}. \
+Times are wall-clock milliseconds per frame stage.</p>\n",
         name = esc(&spec.name),
         w = spec.width,
         hh = spec.height,
         d = spec.max_depth,
         seed = spec.seed,
-        rs = spec.reference.spp,
+        reference = if spec.is_vpl_ground_truth() {
+            format!("reference: the exhaustive sum of the {} VPLs on each method's own camera samples", spec.vpl.vpls)
+        } else {
+            format!("reference {} spp", spec.reference.spp)
+        },
         spp = spec.spp,
-        rep = spec.repeats
+        rep = spec.repeats,
+        metric = metric.label()
     );
+    if r.entries.iter().any(|e| e.rays.is_some()) {
+        h.push_str("<p>Clocks (the thesis, 6.5): all time; time without ray queries (all time minus the backend's estimate of the ray queries' wall-clock time); rays traced.</p>\n");
+    }
     if !r.notes.is_empty() {
         h.push_str("<ul>");
         for n in &r.notes {
@@ -117,182 +130,243 @@ reference {rs} spp, sample counts {spp:?}, timing: median of {rep} run(s). Error
         }
         h.push_str("</ul>\n");
     }
-    let stages = stage_names(&r.entries);
+    if r.scenes.len() > 1 {
+        h.push_str(&summary_table(r, metric));
+    }
     for scene in &r.scenes {
-        let entries: Vec<&Entry> = r.entries.iter().filter(|e| e.scene == scene.name).collect();
-        let _ =
-            write!(h, "<h2>{}</h2>\n<p>Reference: {}</p>\n", esc(&scene.name), esc(&scene.reference_source));
-        // Table of error and milliseconds per stage.
-        h.push_str("<table><tr><th>method</th><th>spp</th><th>relMSE</th><th>PSNR (dB)</th><th>SSIM</th><th>FLIP</th><th>MSE</th>");
-        for st in &stages {
-            let _ = write!(h, "<th>{} ms</th>", esc(st));
-        }
-        h.push_str("<th>total ms</th></tr>\n");
-        for &spp in &spec.spp {
-            let best = entries
-                .iter()
-                .filter(|e| e.spp == spp)
-                .map(|e| e.errors.rel_mse)
-                .filter(|v| v.is_finite())
-                .fold(f64::INFINITY, f64::min);
-            for e in entries.iter().filter(|e| e.spp == spp) {
-                let cls = if e.errors.rel_mse == best { " class=\"best\"" } else { "" };
-                let _ = write!(
-                    h,
-                    "<tr><td class=\"l\">{}</td><td>{}</td><td{cls}>{:.4e}</td><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:.4e}</td>",
-                    esc(&e.method),
-                    e.spp,
-                    e.errors.rel_mse,
-                    e.errors.psnr.map_or("inf".to_string(), |p| format!("{p:.2}")),
-                    e.errors.ssim,
-                    e.errors.flip,
-                    e.errors.mse
-                );
-                for st in &stages {
-                    match stage_ms(e, st) {
-                        Some(v) => write!(h, "<td>{v:.1}</td>"),
-                        None => write!(h, "<td></td>"),
-                    }
-                    .ok();
-                }
-                let _ = writeln!(h, "<td>{:.1}</td></tr>", e.total_ms);
-            }
-        }
-        h.push_str("</table>\n");
-        h.push_str(&error_time_plot(
-            &entries,
-            &spec.methods.iter().map(|m| m.name.clone()).collect::<Vec<_>>(),
-        ));
-        // Images side by side, one row per sample count: full frame, zoomed crop, error map.
-        let [cx, cy, cw, ch] = scene.crop;
-        let _ = writeln!(h, "<p>Crops: {cw}x{ch} pixels at ({cx}, {cy}), enlarged. Error maps: per-pixel relative squared error, log scale 1e-4 (black) to 1e1 (white).</p>");
-        for &spp in &spec.spp {
-            let _ = writeln!(h, "<h3>{spp} spp</h3><div class=\"grid\">");
-            let _ = write!(
-                h,
-                "<figure><img class=\"full\" src=\"{}\"><br><img class=\"crop\" src=\"{}\"><figcaption>reference</figcaption></figure>",
-                esc(&scene.reference),
-                esc(&scene.reference_crop)
-            );
-            for e in entries.iter().filter(|e| e.spp == spp) {
-                let _ = write!(
-                    h,
-                    "<figure><img class=\"full\" src=\"{}\"><br><img class=\"crop\" src=\"{}\"><br>\
-<img class=\"full\" src=\"{}\"><figcaption>{} &middot; relMSE {:.3e} &middot; {:.1} ms</figcaption></figure>",
-                    esc(&e.image),
-                    esc(&e.crop),
-                    esc(&e.error_map),
-                    esc(&e.method),
-                    e.errors.rel_mse,
-                    e.total_ms
-                );
-            }
-            h.push_str("</div>\n");
-        }
+        scene_section(&mut h, r, scene, metric);
     }
     h.push_str("</body></html>\n");
     h
 }
 
-/// Log-log plot of relMSE against total milliseconds, one polyline per method (points in
-/// increasing spp), as inline SVG.
-pub fn error_time_plot(entries: &[&Entry], methods: &[String]) -> String {
-    let pts: Vec<(f64, f64)> = entries
-        .iter()
-        .map(|e| (e.total_ms, e.errors.rel_mse))
-        .filter(|(t, e)| *t > 0.0 && *e > 0.0 && t.is_finite() && e.is_finite())
-        .collect();
-    if pts.is_empty() {
-        return "<p>(no finite positive points to plot)</p>\n".into();
-    }
-    let (w, h, m) = (520.0, 320.0, 60.0);
-    let lx = |v: f64| v.log10();
-    let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
-    let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &(t, e) in &pts {
-        x0 = x0.min(lx(t).floor());
-        x1 = x1.max(lx(t).ceil());
-        y0 = y0.min(lx(e).floor());
-        y1 = y1.max(lx(e).ceil());
-    }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    if y1 <= y0 {
-        y1 = y0 + 1.0;
-    }
-    let px = |t: f64| m + (lx(t) - x0) / (x1 - x0) * (w - 1.5 * m);
-    let py = |e: f64| h - m + -(lx(e) - y0) / (y1 - y0) * (h - 1.5 * m);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-size=\"11\" font-family=\"sans-serif\">\
-<rect x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\" fill=\"white\"/>"
-    );
-    // Axes with decade ticks.
-    for d in (x0 as i32)..=(x1 as i32) {
-        let x = px(10f64.powi(d));
-        let _ = write!(
-            s,
-            "<line x1=\"{x:.1}\" y1=\"{:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#ddd\"/><text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">1e{d}</text>",
-            m / 2.0,
-            h - m,
-            h - m + 14.0
-        );
-    }
-    for d in (y0 as i32)..=(y1 as i32) {
-        let y = py(10f64.powi(d));
-        let _ = write!(
-            s,
-            "<line x1=\"{m}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">1e{d}</text>",
-            w - m / 2.0,
-            m - 4.0,
-            y + 4.0
-        );
-    }
-    let _ = write!(
-        s,
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">total ms per frame (log)</text>\
-<text x=\"12\" y=\"{:.1}\" transform=\"rotate(-90 12 {:.1})\" text-anchor=\"middle\">relMSE (log)</text>",
-        w / 2.0,
-        h - 20.0,
-        h / 2.0,
-        h / 2.0
-    );
-    for (k, name) in methods.iter().enumerate() {
-        let col = COLOURS[k % COLOURS.len()];
-        let mut ms: Vec<&&Entry> = entries.iter().filter(|e| &e.method == name).collect();
-        ms.sort_by_key(|e| e.spp);
-        let p: Vec<(f64, f64, u32)> = ms
-            .iter()
-            .filter(|e| e.total_ms > 0.0 && e.errors.rel_mse > 0.0 && e.errors.rel_mse.is_finite())
-            .map(|e| (px(e.total_ms), py(e.errors.rel_mse), e.spp))
-            .collect();
-        if p.is_empty() {
-            continue;
+/// Method × scene at each sample count, best per column marked.
+fn summary_table(r: &Results, metric: Metric) -> String {
+    let mut h = format!("<h2>All scenes: {}</h2>\n<table><tr><th>method</th>", metric.label());
+    let mut spps = r.spec.spp.clone();
+    spps.sort_unstable();
+    spps.dedup();
+    for &spp in &spps {
+        for s in &r.scenes {
+            let _ = write!(h, "<th>{} {spp} spp</th>", esc(&s.name));
         }
-        let poly: Vec<String> = p.iter().map(|(x, y, _)| format!("{x:.1},{y:.1}")).collect();
+    }
+    h.push_str("</tr>\n");
+    let methods = method_names(&r.entries);
+    for m in &methods {
+        let _ = write!(h, "<tr><td class=\"l\">{}</td>", esc(m));
+        for &spp in &spps {
+            for s in &r.scenes {
+                let cell = |e: &&Entry| e.scene == s.name && e.spp == spp;
+                let best =
+                    r.entries.iter().filter(cell).map(|e| e.errors.get(metric)).fold(f64::INFINITY, f64::min);
+                match r.entries.iter().filter(cell).find(|e| &e.method == m) {
+                    Some(e) => {
+                        let v = e.errors.get(metric);
+                        let cls = if v == best { " class=\"best\"" } else { "" };
+                        let _ = write!(h, "<td{cls}>{v:.3e}</td>");
+                    }
+                    None => h.push_str("<td></td>"),
+                }
+            }
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// Method names in first-seen order.
+fn method_names(entries: &[Entry]) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for e in entries {
+        if !names.contains(&e.method) {
+            names.push(e.method.clone());
+        }
+    }
+    names
+}
+
+fn scene_section(h: &mut String, r: &Results, scene: &SceneResult, metric: Metric) {
+    let spec = &r.spec;
+    let entries: Vec<&Entry> = r.entries.iter().filter(|e| e.scene == scene.name).collect();
+    let _ = write!(h, "<h2>{}</h2>\n<p>Reference: {}</p>\n", esc(&scene.name), esc(&scene.reference_source));
+    h.push_str(&scene_table(&entries, &spec.spp, metric));
+    let methods = method_names(&r.entries);
+    let with_rays = entries.iter().any(|e| e.rays.is_some());
+    let clocks: &[Clock] = if with_rays { &Clock::ALL } else { &[Clock::Spp, Clock::Total] };
+    h.push_str("<div class=\"grid\">");
+    for &c in clocks {
+        h.push_str(&log_log_plot(&series(&entries, &methods, c, metric), c.label(), metric.label()));
+    }
+    h.push_str("</div>\n");
+    if let Some(base) = &spec.equal_time {
+        for &c in clocks.iter().filter(|c| **c != Clock::Spp) {
+            h.push_str(&equal_time_table(&entries, &methods, base, c, metric));
+        }
+    }
+    // Images side by side, one row per sample count: full frame, zoomed crop, error map.
+    let [cx, cy, cw, ch] = scene.crop;
+    let _ = writeln!(h, "<p>Crops: {cw}x{ch} pixels at ({cx}, {cy}), enlarged. Error maps: per-pixel relative squared error, log scale 1e-4 (black) to 1e1 (white).</p>");
+    for &spp in &spec.spp {
+        let _ = writeln!(h, "<h3>{spp} spp</h3><div class=\"grid\">");
+        let (reference, reference_crop) = scene.reference_at(spp);
         let _ = write!(
-            s,
-            "<polyline fill=\"none\" stroke=\"{col}\" stroke-width=\"1.5\" points=\"{}\"/>",
-            poly.join(" ")
+            h,
+            "<figure><img class=\"full\" src=\"{}\"><br><img class=\"crop\" src=\"{}\"><figcaption>reference</figcaption></figure>",
+            esc(reference),
+            esc(reference_crop)
         );
-        for (x, y, spp) in &p {
+        for e in entries.iter().filter(|e| e.spp == spp) {
             let _ = write!(
-                s,
-                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"3.5\" fill=\"{col}\"><title>{} {spp} spp</title></circle>",
-                esc(name)
+                h,
+                "<figure><img class=\"full\" src=\"{}\"><br><img class=\"crop\" src=\"{}\"><br>\
+<img class=\"full\" src=\"{}\"><figcaption>{} &middot; {:.3e} &middot; {:.1} ms</figcaption></figure>",
+                esc(&e.image),
+                esc(&e.crop),
+                esc(&e.error_map),
+                esc(&e.method),
+                e.errors.get(metric),
+                e.total_ms
             );
         }
-        let ly = m / 2.0 + 14.0 * k as f64;
-        let _ = write!(
-            s,
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"10\" height=\"10\" fill=\"{col}\"/><text x=\"{:.1}\" y=\"{:.1}\">{}</text>",
-            w - 150.0,
-            ly - 9.0,
-            w - 136.0,
-            ly,
-            esc(name)
-        );
+        h.push_str("</div>\n");
     }
-    s.push_str("</svg>\n");
-    s
+}
+
+/// Error and milliseconds per stage (and the ray clocks) of every cell of a scene.
+fn scene_table(entries: &[&Entry], spps: &[u32], metric: Metric) -> String {
+    let owned: Vec<Entry> = entries.iter().map(|e| (*e).clone()).collect();
+    let stages = stage_names(&owned);
+    let with_rays = entries.iter().any(|e| e.rays.is_some());
+    let mut h = String::from("<table><tr><th>method</th><th>spp</th><th>relMSE</th><th>relMSE (clamped)</th><th>PSNR (dB)</th><th>SSIM</th><th>FLIP</th><th>MSE</th>");
+    for st in &stages {
+        let _ = write!(h, "<th>{} ms</th>", esc(st));
+    }
+    h.push_str("<th>total ms</th>");
+    if with_rays {
+        h.push_str("<th>ray ms (est.)</th><th>ms without rays</th><th>rays</th>");
+    }
+    h.push_str("</tr>\n");
+    for &spp in spps {
+        let best = entries
+            .iter()
+            .filter(|e| e.spp == spp)
+            .map(|e| e.errors.get(metric))
+            .fold(f64::INFINITY, f64::min);
+        for e in entries.iter().filter(|e| e.spp == spp) {
+            let mark =
+                |m: Metric| if m == metric && e.errors.get(m) == best { " class=\"best\"" } else { "" };
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td>{}</td><td{}>{:.4e}</td><td{}>{:.4e}</td><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:.4e}</td>",
+                esc(&e.method),
+                e.spp,
+                mark(Metric::RelMse),
+                e.errors.rel_mse,
+                mark(Metric::RelMseClamped),
+                e.errors.rel_mse_clamped,
+                e.errors.psnr.map_or("inf".to_string(), |p| format!("{p:.2}")),
+                e.errors.ssim,
+                e.errors.flip,
+                e.errors.mse
+            );
+            for st in &stages {
+                match stage_ms(e, st) {
+                    Some(v) => write!(h, "<td>{v:.1}</td>"),
+                    None => write!(h, "<td></td>"),
+                }
+                .ok();
+            }
+            let _ = write!(h, "<td>{:.1}</td>", e.total_ms);
+            if with_rays {
+                match e.rays {
+                    Some(r) => write!(
+                        h,
+                        "<td>{:.1}</td><td>{:.1}</td><td>{}</td>",
+                        r.ray_ms,
+                        e.total_ms - r.ray_ms,
+                        r.rays
+                    ),
+                    None => write!(h, "<td></td><td></td><td></td>"),
+                }
+                .ok();
+            }
+            h.push_str("</tr>\n");
+        }
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// One series per method: its error against clock `c`, in increasing spp.
+fn series(entries: &[&Entry], methods: &[String], c: Clock, metric: Metric) -> Vec<Series> {
+    methods
+        .iter()
+        .filter(|m| entries.iter().any(|e| &&e.method == m))
+        .map(|m| {
+            let mut es: Vec<&&Entry> = entries.iter().filter(|e| &e.method == m).collect();
+            es.sort_by_key(|e| e.spp);
+            let points = es
+                .iter()
+                .filter_map(|e| Some((e.clock(c)?, e.errors.get(metric), format!("{} spp", e.spp))))
+                .collect();
+            Series { name: m.clone(), points }
+        })
+        .collect()
+}
+
+/// Every method's error interpolated (log-log) at the times the baseline method measured
+/// on clock `c`; blank outside a method's measured range.
+fn equal_time_table(entries: &[&Entry], methods: &[String], base: &str, c: Clock, metric: Metric) -> String {
+    let mut times: Vec<(u32, f64)> =
+        entries.iter().filter(|e| e.method == base).filter_map(|e| Some((e.spp, e.clock(c)?))).collect();
+    if times.is_empty() {
+        return String::new();
+    }
+    times.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut h = format!(
+        "<p>Equal {}: {} interpolated at the measurements of {}.</p><table><tr><th>method</th>",
+        esc(c.label()),
+        metric.label(),
+        esc(base)
+    );
+    for (spp, t) in &times {
+        let _ = write!(h, "<th>{} ({} at {spp} spp)</th>", fmt_clock(*t), esc(base));
+    }
+    h.push_str("</tr>\n");
+    let rows: Vec<(String, Vec<Option<f64>>)> = methods
+        .iter()
+        .map(|m| {
+            let pts: Vec<(f64, f64)> = entries
+                .iter()
+                .filter(|e| &e.method == m)
+                .filter_map(|e| Some((e.clock(c)?, e.errors.get(metric))))
+                .collect();
+            (m.clone(), times.iter().map(|(_, t)| interpolate_log_log(&pts, *t)).collect())
+        })
+        .collect();
+    for (m, vals) in &rows {
+        let _ = write!(h, "<tr><td class=\"l\">{}</td>", esc(m));
+        for (k, v) in vals.iter().enumerate() {
+            let best = rows.iter().filter_map(|r| r.1[k]).fold(f64::INFINITY, f64::min);
+            match v {
+                Some(v) if *v == best => write!(h, "<td class=\"best\">{v:.3e}</td>"),
+                Some(v) => write!(h, "<td>{v:.3e}</td>"),
+                None => write!(h, "<td>&mdash;</td>"),
+            }
+            .ok();
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+fn fmt_clock(v: f64) -> String {
+    if v >= 1e5 {
+        format!("{v:.3e}")
+    } else {
+        format!("{v:.1}")
+    }
 }

@@ -54,6 +54,7 @@ impl Backend for Fake {
             albedo: None,
             normal: None,
             stages: vec![("trace".into(), 2.0 * spp as f64), ("filter".into(), 1.0)],
+            rays: None,
         })
     }
 }

@@ -11,6 +11,7 @@
 //!   with exact visibility at every pixel, and the cache's [`crate::cache::VplSet`] view.
 //! - [`integrator`]: one frame: VPLs, G-buffer, importance cache, shading with a sampler,
 //!   the optimisation step; the d-distance layer of the thesis's Figure 27.
+//! - [`rays`]: shadow rays counted (and sampled for replay) for the experiments' clocks.
 //!
 //! A VPL's `weight` already holds every Monte Carlo normalisation (selection probability,
 //! densities, number of samples or light paths), so the VPL estimate of the reflected
@@ -21,6 +22,7 @@ pub mod eval;
 pub mod exhaustive;
 pub mod generate;
 pub mod integrator;
+pub mod rays;
 pub mod seam;
 
 #[cfg(test)]

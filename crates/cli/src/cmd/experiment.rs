@@ -1,8 +1,9 @@
-//! `filtrace experiment SPEC.toml --out DIR`: every method of the spec at every sample count
-//! on every scene, against a reference rendered once (cached under `DIR/cache` by a hash of
-//! its settings) or read from a file; writes `DIR/report.html`, `DIR/results.json`,
-//! `DIR/results.csv` and the PNGs the report shows. See `filtrace_eval::experiment` for the
-//! spec format and `experiments/` for checked-in specs.
+//! `filtrace experiment SPEC.toml... --out DIR`: every method of the spec at every sample
+//! count on every scene, against a reference rendered once (cached under `DIR/cache` by a
+//! hash of its settings) or read from a file; writes `DIR/report.html`, `DIR/results.json`,
+//! `DIR/results.csv` and the PNGs the report shows (several specs: `DIR/<name>/...`, one
+//! cache). See `filtrace_eval::experiment` for the spec format and `experiments/` for
+//! checked-in specs; the many-light methods are in [`super::experiment_vpl`].
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -10,15 +11,19 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use filtrace_core::Image;
-use filtrace_eval::experiment::{run_experiment, Backend, ExperimentSpec, MethodRun, MethodSpec, SceneSpec};
+use filtrace_eval::experiment::{
+    run_experiment_with_cache, Backend, Clock, ExperimentSpec, MethodRun, MethodSpec, SceneSpec,
+};
 use filtrace_pipeline::{FilterChoice, PipelineSettings};
 use filtrace_render::{RenderSettings, Renderer};
 use filtrace_scene::Scene;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The experiment spec (TOML).
-    pub spec: PathBuf,
+    /// The experiment spec(s) (TOML). With several, each writes into OUT/<its name> and
+    /// all share the reference cache OUT/cache.
+    #[arg(required = true, num_args = 1..)]
+    pub spec: Vec<PathBuf>,
     /// Output folder (created).
     #[arg(long)]
     pub out: PathBuf,
@@ -36,24 +41,37 @@ pub struct PipelineBackend {
     /// Folder of the spec: scene files are looked up relative to it first.
     spec_dir: PathBuf,
     scenes: HashMap<String, Scene>,
+    fingerprints: HashMap<String, String>,
+    /// The many-light methods and their ground truth.
+    vpl: super::experiment_vpl::VplBackend,
 }
 
 impl PipelineBackend {
     pub fn new(spec_dir: &Path) -> Self {
-        Self { spec_dir: spec_dir.to_path_buf(), scenes: HashMap::new() }
+        Self {
+            spec_dir: spec_dir.to_path_buf(),
+            scenes: HashMap::new(),
+            fingerprints: HashMap::new(),
+            vpl: Default::default(),
+        }
     }
 
     fn scene(&mut self, name: &str) -> Result<Scene, String> {
-        if let Some(s) = self.scenes.get(name) {
-            return Ok(s.clone());
-        }
-        let beside_spec = self.spec_dir.join(name);
-        let arg =
-            if beside_spec.is_file() { beside_spec.to_string_lossy().into_owned() } else { name.to_string() };
-        let s = filtrace_scene::load_scene(&arg).map_err(|e| format!("cannot load scene '{name}': {e}"))?;
-        self.scenes.insert(name.to_string(), s.clone());
-        Ok(s)
+        cached_scene(&mut self.scenes, &self.spec_dir, name)
     }
+}
+
+/// The scene `name` (a file beside the spec, else a built-in or a path), loaded once.
+fn cached_scene(scenes: &mut HashMap<String, Scene>, spec_dir: &Path, name: &str) -> Result<Scene, String> {
+    if let Some(s) = scenes.get(name) {
+        return Ok(s.clone());
+    }
+    let beside_spec = spec_dir.join(name);
+    let arg =
+        if beside_spec.is_file() { beside_spec.to_string_lossy().into_owned() } else { name.to_string() };
+    let s = filtrace_scene::load_scene(&arg).map_err(|e| format!("cannot load scene '{name}': {e}"))?;
+    scenes.insert(name.to_string(), s.clone());
+    Ok(s)
 }
 
 impl Backend for PipelineBackend {
@@ -62,13 +80,41 @@ impl Backend for PipelineBackend {
     }
 
     fn scene_fingerprint(&mut self, scene: &SceneSpec) -> Result<String, String> {
+        if let Some(f) = self.fingerprints.get(&scene.name) {
+            return Ok(f.clone());
+        }
         // Everything the renderer reads is plain data with a Debug form: hash that.
         let s = self.scene(&scene.name)?;
         let text = format!(
             "{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
             s.meshes, s.instances, s.materials, s.textures, s.lights, s.camera
         );
-        Ok(format!("{:016x}", filtrace_eval::experiment::fnv1a64(text.as_bytes())))
+        let f = format!("{:016x}", filtrace_eval::experiment::fnv1a64(text.as_bytes()));
+        self.fingerprints.insert(scene.name.clone(), f.clone());
+        Ok(f)
+    }
+
+    fn ground_truth_fingerprint(
+        &mut self,
+        spec: &ExperimentSpec,
+        scene: &SceneSpec,
+    ) -> Result<String, String> {
+        // The VPLs too: a renderer that makes other VPLs never meets a stale ground truth.
+        let f = self.scene_fingerprint(scene)?;
+        let (scenes, dir) = (&mut self.scenes, &self.spec_dir);
+        let vpls = self.vpl.vpl_fingerprint(spec, &scene.name, || cached_scene(scenes, dir, &scene.name))?;
+        Ok(format!("{f}-{vpls:016x}"))
+    }
+
+    fn render_ground_truth(
+        &mut self,
+        spec: &ExperimentSpec,
+        scene: &SceneSpec,
+        spp: u32,
+        previous: Option<(u32, &Image)>,
+    ) -> Result<Image, String> {
+        let (scenes, dir) = (&mut self.scenes, &self.spec_dir);
+        self.vpl.ground_truth(spec, &scene.name, || cached_scene(scenes, dir, &scene.name), spp, previous)
     }
 
     fn render_reference(&mut self, spec: &ExperimentSpec, scene: &SceneSpec) -> Result<Image, String> {
@@ -96,6 +142,10 @@ impl Backend for PipelineBackend {
         m: &MethodSpec,
         spp: u32,
     ) -> Result<MethodRun, String> {
+        if let Some(vm) = spec.vpl_method(m) {
+            let (scenes, dir) = (&mut self.scenes, &self.spec_dir);
+            return self.vpl.run(spec, &scene.name, || cached_scene(scenes, dir, &scene.name), &vm, spp);
+        }
         let choice = FilterChoice {
             name: m.filter.clone(),
             preset: m.preset.clone(),
@@ -126,59 +176,109 @@ impl Backend for PipelineBackend {
             albedo: Some(f.images.guide.albedo.clone()),
             normal: Some(f.images.guide.normal.clone()),
             stages,
+            rays: None,
         })
     }
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let spec = ExperimentSpec::load(&a.spec).map_err(|e| anyhow::anyhow!("{e}"))?;
-    std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", a.out.display()))?;
-    // Before the (long) runs, not after them.
-    for name in ["report.html", "results.json", "results.csv"] {
-        filtrace_io::check_writable(a.out.join(name))?;
+    // Every spec is checked before anything runs.
+    let specs = a
+        .spec
+        .iter()
+        .map(|p| ExperimentSpec::load(p).map(|s| (p.clone(), s)))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let outs = output_dirs(&a.out, &specs)?;
+    for out in &outs {
+        std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", out.display()))?;
+        // Before the (long) runs, not after them.
+        for name in ["report.html", "results.json", "results.csv"] {
+            filtrace_io::check_writable(out.join(name))?;
+        }
     }
     let threads = a
         .threads
         .map(|t| t as usize)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-    let spec_dir = a.spec.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let bar = super::render_session::progress_bar(1, &spec.name);
-    let mut backend = PipelineBackend::new(&spec_dir);
-    let mut results = pool
-        .install(|| {
-            run_experiment(&spec, &spec_dir, &a.out, &mut backend, &mut |p| {
-                bar.set_length(p.total as u64);
-                bar.set_position(p.done as u64);
-                bar.set_message(p.message.to_string());
+    // One reference cache for all the specs of the call: they share ground truths.
+    let cache = a.out.join("cache");
+    for ((path, spec), out) in specs.iter().zip(&outs) {
+        let spec_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let bar = super::render_session::progress_bar(1, &spec.name);
+        let mut backend = PipelineBackend::new(&spec_dir);
+        let mut results = pool
+            .install(|| {
+                run_experiment_with_cache(spec, &spec_dir, out, &cache, &mut backend, &mut |p| {
+                    bar.set_length(p.total as u64);
+                    bar.set_position(p.done as u64);
+                    bar.set_message(p.message.to_string());
+                })
             })
-        })
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    bar.finish_and_clear();
-    results.notes.push(format!("{threads} worker threads."));
-    filtrace_eval::report::write_all(&a.out, &results).map_err(|e| anyhow::anyhow!("{e}"))?;
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        bar.finish_and_clear();
+        results.notes.push(format!("{threads} worker threads."));
+        filtrace_eval::report::write_all(out, &results).map_err(|e| anyhow::anyhow!("{e}"))?;
+        print_summary(&results, out)?;
+    }
+    Ok(())
+}
+
+/// `OUT` for one spec; `OUT/<spec name>` for each of several (names must differ).
+fn output_dirs(out: &Path, specs: &[(PathBuf, ExperimentSpec)]) -> anyhow::Result<Vec<PathBuf>> {
+    if specs.len() == 1 {
+        return Ok(vec![out.to_path_buf()]);
+    }
+    let mut dirs: Vec<PathBuf> = Vec::new();
+    for (path, spec) in specs {
+        let d = out.join(filtrace_eval::experiment::file_stem(&spec.name));
+        if dirs.contains(&d) || d == out.join("cache") {
+            anyhow::bail!(
+                "{}: experiment name {:?} used twice (or named \"cache\"): outputs would collide",
+                path.display(),
+                spec.name
+            );
+        }
+        dirs.push(d);
+    }
+    Ok(dirs)
+}
+
+/// The markdown table of every cell on stdout.
+fn print_summary(results: &filtrace_eval::experiment::Results, dir: &Path) -> anyhow::Result<()> {
+    let metric = results.spec.metric();
     let mut out = super::output::stdout();
-    writeln!(out, "| scene | method | spp | relMSE | PSNR | frame ms |")?;
-    writeln!(out, "|---|---|---:|---:|---:|---:|")?;
+    writeln!(out, "{}:\n", results.spec.name)?;
+    writeln!(
+        out,
+        "| scene | method | spp | {} | PSNR | frame ms | ms without rays | rays |",
+        metric.label()
+    )?;
+    writeln!(out, "|---|---|---:|---:|---:|---:|---:|---:|")?;
     for e in &results.entries {
+        let clock = |c: Clock| e.clock(c).map_or(String::new(), |v| format!("{v:.1}"));
         writeln!(
             out,
-            "| {} | {} | {} | {:.4e} | {} | {:.1} |",
+            "| {} | {} | {} | {:.4e} | {} | {:.1} | {} | {} |",
             e.scene,
             e.method,
             e.spp,
-            e.errors.rel_mse,
+            e.errors.get(metric),
             e.errors.psnr.map_or("inf".into(), |p| format!("{p:.2}")),
-            e.total_ms
+            e.total_ms,
+            clock(Clock::WithoutRays),
+            e.rays.map_or(String::new(), |r| r.rays.to_string())
         )?;
     }
-    writeln!(out, "wrote {}", a.out.join("report.html").display())?;
+    writeln!(out, "wrote {}", dir.join("report.html").display())?;
     Ok(out.flush()?)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use filtrace_eval::experiment::run_experiment;
 
     /// The whole experiment on the real renderer and pipeline at 16x16 (fast tier).
     #[test]
@@ -202,7 +302,8 @@ mod tests {
         std::fs::remove_dir_all(&out).ok();
     }
 
-    /// Every checked-in spec parses, and every method's filter choice is valid.
+    /// Every checked-in spec parses, every path method's filter choice is valid and every
+    /// many-light method's settings are accepted by the renderer.
     #[test]
     fn checked_in_specs_are_valid() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
@@ -212,6 +313,11 @@ mod tests {
             if p.extension().is_some_and(|e| e == "toml") {
                 let spec = ExperimentSpec::load(&p).unwrap_or_else(|e| panic!("{e}"));
                 for m in &spec.methods {
+                    if let Some(vm) = spec.vpl_method(m) {
+                        super::super::experiment_vpl::vpl_settings(&vm, spec.seed, 1.0)
+                            .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                        continue;
+                    }
                     let c = FilterChoice {
                         name: m.filter.clone(),
                         preset: m.preset.clone(),
@@ -222,6 +328,6 @@ mod tests {
                 n += 1;
             }
         }
-        assert!(n >= 3);
+        assert!(n >= 7);
     }
 }

@@ -13,6 +13,7 @@ pub mod bench_vpl;
 pub mod compare;
 pub mod denoise;
 pub mod experiment;
+pub mod experiment_vpl;
 pub mod frame_source;
 pub mod output;
 pub mod preview;

@@ -24,7 +24,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 #[inline]
 pub fn full_contribution(ctx: &PathContext, vpl: &Vpl, rx: &Receiver, vpls: &Vpls) -> Rgb {
     let (c, w, dist) = contribution(vpl, rx, vpls.bound);
-    if c == Rgb::ZERO || ctx.accel.occluded(&rx.shadow_ray(w, dist)) {
+    if c == Rgb::ZERO || super::rays::occluded(ctx.accel, &rx.shadow_ray(w, dist)) {
         Rgb::ZERO
     } else {
         c
@@ -225,7 +225,7 @@ impl VplSet for SceneVpls<'_> {
     fn visible(&self, vpl: usize, site: &CachePoint) -> bool {
         let Some(rx) = self.receiver(site) else { return false };
         let (_, w, dist) = contribution(&self.vpls.vpls[vpl], rx, self.vpls.bound);
-        dist > 0.0 && !self.ctx.accel.occluded(&rx.shadow_ray(w, dist))
+        dist > 0.0 && !super::rays::occluded(self.ctx.accel, &rx.shadow_ray(w, dist))
     }
 
     /// See `bounded_at`.

@@ -1,5 +1,7 @@
 //! Eight-ray packet kernels with AVX2 ([`crate::SceneAccel::intersect_packet`],
-//! [`crate::SceneAccel::occluded_packet`] on a scene of one object).
+//! [`crate::SceneAccel::occluded_packet`] on one object: the scene's only one, or, for the
+//! flat kernels, each instance a packet reaches through the top level,
+//! `packet_two_level.rs`).
 //!
 //! - **Flat bottom levels** (submodule `flat`; at most
 //!   [`crate::BuildParams::max_flat_triangles`] triangles, the Cornell box): the group

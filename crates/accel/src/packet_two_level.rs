@@ -17,8 +17,8 @@
 //! `intersect_packet`: engine 336 M with it at 4 lanes, 331 M at 6, 272 M without;
 //! bunny-room 254 M with, 233 M without; docs/perf-accel.md, "Packets through the top
 //! level"). The top-level walk and the flat kernels are what pays: against one
-//! single-ray query per lane, closest hits -29 % (bunny-room), -6 % (engine), -2 %
-//! (classroom), any hits -35 %, -14 %, -17 %.
+//! single-ray query per lane, closest hits -35 % instructions (bunny-room), -10 %
+//! (engine), -7 % (classroom), any hits -41 %, -19 %, -25 %; CPU time -20 %, -5 %, -1 %.
 //!
 //! Per lane the result is the single-ray query's: a lane's closest hit is the smallest
 //! `(t, instance, prim)` over the triangles it reaches with `t` in its `[t_min, t_max]`

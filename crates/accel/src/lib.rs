@@ -50,8 +50,10 @@
 //! flat mesh (the Cornell box) is tested 8 rays x 1 triangle per instruction, and a
 //! single BVH mesh is traversed once for the whole packet (8 rays x 1 child box) when the
 //! active lanes share direction signs and watertight permutation and their directions
-//! lie close together (camera tiles); other
-//! packets, two-level scenes and CPUs without AVX2 take one single-ray query per lane.
+//! lie close together (camera tiles). Scenes of several objects (instances, moving or
+//! not) walk the top level once per packet, testing flat instances 8 rays x 1 triangle in
+//! their object space and BVH instances per lane (`packet_two_level.rs`). Other packets
+//! and CPUs without AVX2 take one single-ray query per lane.
 //!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
 //! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and
@@ -79,6 +81,8 @@ mod blas;
 mod brute;
 mod flat_blas;
 mod packet;
+#[cfg(target_arch = "x86_64")]
+mod packet_two_level;
 mod ray_packet;
 mod refit;
 pub mod sah;

@@ -22,17 +22,25 @@ use filtrace_core::Ray;
 /// (camera tiles) and 1.30x (incoherent), 2 lanes 1.22x and 1.10x, 1 lane 0.74x and 0.64x.
 /// Cornell render (`throughput 16 1`, 3 interleaved runs, with [`MIN_LANES_ANY`]): 4 and 5
 /// lanes 2.02-2.03 M samples per CPU-s, 2 and 3 lanes 2.08-2.12, 1 and 1 2.05-2.12.
-const MIN_LANES_CLOSEST: u32 = 2;
+pub(crate) const MIN_LANES_CLOSEST: u32 = 2;
 
 /// The same for any-hit queries: 4 lanes 1.17x (shadow rays) and 1.12x (incoherent),
 /// 3 lanes 0.95x and 0.97x, 2 lanes 0.73x and 0.78x; the render (above) is as fast or
 /// faster with 3 as with 4.
-const MIN_LANES_ANY: u32 = 3;
+pub(crate) const MIN_LANES_ANY: u32 = 3;
 
 /// The thresholds of the packet traversal of BVH meshes (camera tiles on the bunny, single
 /// / packet: 4 lanes 1.05x, 3 lanes 0.93x; docs/perf-accel.md, third pass).
-const MIN_LANES_CLOSEST_BVH: u32 = 4;
-const MIN_LANES_ANY_BVH: u32 = 5;
+pub(crate) const MIN_LANES_CLOSEST_BVH: u32 = 4;
+pub(crate) const MIN_LANES_ANY_BVH: u32 = 5;
+
+/// Fewest active lanes for which scenes of several objects take the packet through the
+/// top level (`packet_two_level.rs`) rather than one single-ray query per lane. The
+/// gates of `intersect_packet`/`occluded_packet` (2 and 3 lanes) apply first; with them
+/// the renders of bunny-room, engine and classroom cost fewer instructions in the ray
+/// queries than per lane (docs/perf-accel.md, "Packets through the top level"; higher
+/// thresholds not yet measured).
+const MIN_LANES_TWO_LEVEL: u32 = 2;
 
 impl SceneAccel {
     /// Closest hits of the lanes whose bit is set in `active`; bit i of the result's `mask`
@@ -56,6 +64,9 @@ impl SceneAccel {
                         _ => {}
                     }
                 }
+            } else if active.count_ones() >= MIN_LANES_TWO_LEVEL {
+                // SAFETY: as above.
+                return unsafe { self.intersect_two_level(rays, active) };
             }
         }
         // (The lane loops check each active lane's validity, as the single-ray queries do.)
@@ -85,6 +96,9 @@ impl SceneAccel {
                 if let Some(o) = occluded {
                     return o;
                 }
+            } else if active.count_ones() >= MIN_LANES_TWO_LEVEL {
+                // SAFETY: as in `intersect_packet`.
+                return unsafe { self.occluded_two_level(rays, active) };
             }
         }
         self.occluded_packet_lanes(rays, active)
@@ -294,14 +308,14 @@ impl SceneAccel {
 /// The CPU has AVX-512F and AVX-512VL (the flat kernels' builds for 32 registers).
 #[cfg(target_arch = "x86_64")]
 #[inline]
-fn avx512() -> bool {
+pub(crate) fn avx512() -> bool {
     filtrace_core::cpu::isa().has_avx512()
 }
 
 /// Lanes whose rays are valid ([`Ray::is_valid`]: finite, non-zero direction, no NaN
 /// bounds); the others never hit, as in the single-ray queries.
 #[inline]
-fn valid_lanes(rays: &RayPacket) -> u8 {
+pub(crate) fn valid_lanes(rays: &RayPacket) -> u8 {
     (0..LANES).filter(|&i| rays.lane(i).is_valid()).fold(0, |m, i| m | (1 << i))
 }
 

@@ -5,17 +5,27 @@
 //! order, a wrong mask, a lane written twice) changes some bits, so this cheap test is
 //! the exactness contract of `integrator::lockstep`.
 
+use filtrace_core::{Affine3A, Quat, Vec3};
 use filtrace_render::{Film, PathParams, RayQueries, RenderSettings, Renderer, TraceMode};
+use filtrace_scene::animation::Pose;
 use filtrace_scene::Scene;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-/// Renders samples `[first, first + count)` then `[first + count, end)` in two passes.
-fn render(scene: &Scene, settings: &RenderSettings, mode: TraceMode, queries: RayQueries) -> Film {
-    let r = Renderer::new(scene.clone(), settings.clone())
+/// Renders samples `[first, first + count)` then `[first + count, end)` in two passes,
+/// after `prepare` (a frame of an animation, moved instances).
+fn render(
+    scene: &Scene,
+    settings: &RenderSettings,
+    mode: TraceMode,
+    queries: RayQueries,
+    prepare: &dyn Fn(&mut Renderer),
+) -> Film {
+    let mut r = Renderer::new(scene.clone(), settings.clone())
         .unwrap()
         .with_trace_mode(mode)
         .with_ray_queries(queries);
+    prepare(&mut r);
     let mut film = r.new_film();
     let cancel = AtomicBool::new(false);
     let half = settings.spp / 2;
@@ -46,16 +56,28 @@ fn film_bits(f: &Film) -> Vec<u64> {
 }
 
 fn assert_identical(name: &str, scene: &Scene, width: u32, height: u32, spp: u32) {
+    assert_identical_after(name, scene, width, height, spp, &|_| {});
+}
+
+/// [`assert_identical`] on the renderer after `prepare`.
+fn assert_identical_after(
+    name: &str,
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    spp: u32,
+    prepare: &dyn Fn(&mut Renderer),
+) {
     for params in PathParams::presets() {
         let settings = RenderSettings { width, height, spp, max_depth: params.max_depth, seed: 7 };
-        let scalar = render(scene, &settings, TraceMode::Scalar, RayQueries::PerLane);
+        let scalar = render(scene, &settings, TraceMode::Scalar, RayQueries::PerLane, prepare);
         assert!(scalar.total_samples() > 0);
         for (mode, queries) in [
             (TraceMode::Lockstep, RayQueries::PerLane),
             (TraceMode::LockstepPortable, RayQueries::PerLane),
             (TraceMode::Lockstep, RayQueries::Packet),
         ] {
-            let lock = render(scene, &settings, mode, queries);
+            let lock = render(scene, &settings, mode, queries, prepare);
             let (a, b) = (film_bits(&scalar), film_bits(&lock));
             if a != b {
                 let first = a.iter().zip(&b).position(|(x, y)| x != y).unwrap();
@@ -83,6 +105,63 @@ fn lockstep_films_equal_scalar_films_on_builtin_scenes() {
     for name in filtrace_scene::builtin_names() {
         let scene = filtrace_scene::builtin(name).unwrap();
         assert_identical(name, &scene, 29, 18, 5);
+    }
+}
+
+/// The animated built-in scenes at a frame other than the rest pose (camera, lights and
+/// instances moved by `prepare_frame`), and the classroom with every fourth instance moved
+/// (top-level updates under the packets that cross several instances).
+#[test]
+fn lockstep_films_equal_scalar_films_on_animated_frames() {
+    for (name, frame) in [("cornell-anim", 17), ("classroom", 30), ("colonnade-flight", 50)] {
+        let scene = filtrace_scene::builtin(name).unwrap();
+        let prepare = |r: &mut Renderer| {
+            r.prepare_frame(frame).unwrap();
+        };
+        assert_identical_after(&format!("{name} frame {frame}"), &scene, 29, 18, 4, &prepare);
+    }
+    let scene = filtrace_scene::builtin("classroom").unwrap();
+    let moved = |r: &mut Renderer| {
+        let instances = (0..r.scene().instances.len() as u32)
+            .step_by(4)
+            .map(|i| {
+                let t = r.scene().instances[i as usize].transform;
+                let shift = Affine3A::from_rotation_translation(
+                    Quat::from_rotation_y(0.1 * i as f32),
+                    Vec3::new(0.05 * (i % 7) as f32, 0.02, -0.03 * (i % 5) as f32),
+                );
+                (i, shift * t)
+            })
+            .collect();
+        r.set_pose(&Pose { time: 0.0, camera: None, instances, lights: Vec::new() }).unwrap();
+    };
+    assert_identical_after("classroom, instances moved", &scene, 29, 18, 4, &moved);
+}
+
+/// `../shared/<rel>` from the project root; `None` when absent, a failure under CI.
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared").join(rel);
+    if p.exists() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{} not found (../shared is required when CI is set)",
+        p.display()
+    );
+    println!("SKIPPED: {} not found", p.display());
+    None
+}
+
+/// The benchmark suite's scenes from ../shared (`filtrace bench suite` loads them the same
+/// way): the 2CylinderEngine glTF (34 meshes, instanced: packets through the top level),
+/// the bunny and the teapot alone (one BVH mesh: the single-object packet kernels).
+#[test]
+fn lockstep_films_equal_scalar_films_on_shared_suite_scenes() {
+    for rel in ["scenes/gltf/2CylinderEngine.glb", "scenes/bunny/bunny.obj", "scenes/teapot/teapot.obj"] {
+        let Some(path) = shared(rel) else { continue };
+        let scene = filtrace_scene::load(&path).unwrap();
+        assert_identical(rel, &scene, 24, 16, 3);
     }
 }
 

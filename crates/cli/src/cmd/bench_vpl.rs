@@ -51,7 +51,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_depth: 8,
         seed: 0,
     };
-    let renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let samplers: Vec<SamplerKind> = if args.samplers.is_empty() {
         SamplerKind::ALL.to_vec()
     } else {
@@ -70,7 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             cache: CacheParams { cache_points: args.cache_points, ..CacheParams::default() },
             ground_truth: false,
         };
-        let frame = render_vpl_frame(&renderer, &vs, args.spp, &cancel)
+        let frame = render_vpl_frame(&mut renderer, &vs, args.spp, &cancel)
             .map_err(|e| anyhow::anyhow!(e))?
             .ok_or_else(|| anyhow::anyhow!("cancelled"))?;
         let t = frame.times;

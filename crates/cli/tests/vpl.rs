@@ -90,3 +90,73 @@ fn bench_vpl_prints_every_stage() {
     let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(json["rows"].as_array().unwrap().len(), 5, "{json}");
 }
+
+/// `--integrator vpl` renders in the path tracer's progressive passes: with `optimized`
+/// learning after each of 4 passes, the image is the same with 1 and 2 threads.
+#[test]
+fn vpl_render_is_progressive_and_thread_independent() {
+    let dir = temp_dir("passes");
+    let mean = |threads: &str| {
+        let out = dir.join(format!("t{threads}.exr"));
+        let o = run(bin()
+            .args([
+                "render",
+                "cornell",
+                "--integrator",
+                "vpl",
+                "--res",
+                "12x12",
+                "--spp",
+                "8",
+                "--passes-spp",
+                "2",
+            ])
+            .args(["--vpls", "128", "--cache-points", "16", "--threads", threads, "--json", "--out"])
+            .arg(&out));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        assert_eq!(json["spp_done"], 8, "{json}");
+        assert_eq!(json["cancelled"], false, "{json}");
+        json["mean_rgb"].clone()
+    };
+    assert_eq!(mean("1"), mean("2"));
+}
+
+/// Ctrl-C after the second pass (1 + 1 samples) writes the two-sample image and exits
+/// with 130, as the path tracer does.
+#[test]
+fn ctrl_c_keeps_the_finished_passes_of_a_vpl_render() {
+    use std::io::{BufRead, BufReader};
+    let dir = temp_dir("cancel");
+    let out = dir.join("c.exr");
+    let mut child = bin()
+        .args([
+            "render",
+            "cornell",
+            "--integrator",
+            "vpl",
+            "--res",
+            "8x8",
+            "--spp",
+            "64",
+            "--passes-spp",
+            "1",
+        ])
+        .args(["--vpls", "64", "--cache-points", "8", "--json", "--out"])
+        .arg(&out)
+        .env("FILTRACE_TEST_PAUSE", "pass 2")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the filtrace binary starts");
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines().map_while(Result::ok);
+    assert!(lines.any(|l| l == "filtrace-test: pass 2"), "no pause marker");
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(kill.success());
+    let rest: Vec<String> = lines.collect();
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{rest:?}");
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!((json["spp_done"].as_u64(), json["cancelled"].as_bool()), (Some(2), Some(true)), "{json}");
+    assert!(out.exists() && rest.iter().any(|l| l.contains("cancelled")), "{rest:?}");
+}

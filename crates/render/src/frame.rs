@@ -24,7 +24,9 @@
 //!
 //! Every update ([`Renderer::set_pose`], [`Renderer::prepare_frame`],
 //! [`Renderer::set_camera`]) begins a new frame: the state before it becomes the previous
-//! frame, which the [`crate::motion`] AOV reprojects into.
+//! frame, which the [`crate::motion`] AOV reprojects into. Every update, a new resolution
+//! included, ends with the integrator's per-frame `prepare` (a VPL renderer makes its lights
+//! and cache there); the update's `seconds` do not include it.
 
 use crate::camera::PinholeCamera;
 use crate::renderer::Renderer;
@@ -45,14 +47,22 @@ impl Renderer {
     /// scene without animation is the same at every frame) and updates what moved.
     pub fn prepare_frame(&mut self, index: i64) -> Result<FrameUpdate, FrameError> {
         let pose = self.scene.pose_at_frame(index).map_err(FrameError::Clock)?;
-        let update = self.set_pose(&pose)?;
+        let update = self.apply_pose(&pose)?;
         self.frame.desc.index = index;
+        self.prepare_integrator();
         Ok(update)
     }
 
     /// Applies `pose` (instances, lights, camera; a new frame, see the module docs) and
     /// updates what moved. A pose naming unknown instances or lights is rejected whole.
     pub fn set_pose(&mut self, pose: &Pose) -> Result<FrameUpdate, FrameError> {
+        let update = self.apply_pose(pose)?;
+        self.prepare_integrator();
+        Ok(update)
+    }
+
+    /// [`Renderer::set_pose`] without the integrator's `prepare`.
+    fn apply_pose(&mut self, pose: &Pose) -> Result<FrameUpdate, FrameError> {
         if let Some(&(i, _)) = pose.instances.iter().find(|(i, _)| *i as usize >= self.scene.instances.len())
         {
             return Err(FrameError::UnknownInstance(i));
@@ -91,6 +101,7 @@ impl Renderer {
         self.begin_frame();
         self.frame.moved_last.clear();
         self.move_camera(camera);
+        self.prepare_integrator();
     }
 
     /// Changes the image size (films of the old size no longer fit); the previous frame's
@@ -99,6 +110,7 @@ impl Renderer {
         let settings = crate::RenderSettings { width, height, ..self.settings.clone() };
         settings.validate().map_err(FrameError::Resolution)?;
         self.apply_size(settings);
+        self.prepare_integrator();
         Ok(())
     }
 

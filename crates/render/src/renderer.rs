@@ -1,5 +1,6 @@
-//! The renderer: owns a scene with its acceleration structure and lights, and adds path
-//! traced samples to a [`Film`] in progressive passes.
+//! The renderer: owns a scene with its acceleration structure and lights and an
+//! [`Integrator`] (the path tracer unless another is set), prepares the integrator for each
+//! frame, and adds its samples to a [`Film`] in progressive passes of tiles.
 //!
 //! ```no_run
 //! use std::sync::atomic::AtomicBool;
@@ -28,12 +29,14 @@
 //! of two of the others once the first pass is done.
 
 use crate::camera::PinholeCamera;
-use crate::film::{Film, FilmPixel};
+use crate::film::Film;
 use crate::frame_state::FrameState;
-use crate::integrator::lockstep::{self, LaneStats, LockstepContext, LockstepTables, RayQueries};
-use crate::integrator::pool::{Pool, POOL};
-pub use crate::integrator::IntegratorKind;
-use crate::integrator::{self, CameraSample, PathContext, PathParams, SLOT_PIXEL};
+use crate::integrator::lockstep::{LaneStats, LockstepContext, LockstepTables, RayQueries};
+use crate::integrator::tiles::{self, Lanes};
+use crate::integrator::{
+    self, FrameContext, PassEnd, PathContext, PathIntegrator, PathParams, Tile, SLOT_PIXEL,
+};
+pub use crate::integrator::{Integrator, IntegratorKind, TraceMode};
 use crate::lights::LightSet;
 pub use crate::settings::{RenderError, RenderSettings, MAX_PIXELS, MAX_SIDE};
 use crate::surface::SceneGeometry;
@@ -48,23 +51,6 @@ use std::time::Instant;
 /// Rows per tile. 4 rows of a 512-wide image at 256 spp are ~0.5 M samples: fine-grained
 /// enough to balance 2-16 threads and to cancel within a fraction of a second.
 pub const TILE_ROWS: usize = 4;
-/// How the path tracer ([`IntegratorKind::Path`]) walks its paths. Both give the same film,
-/// bit for bit (`tests/lockstep.rs`); the choice is speed only.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum TraceMode {
-    /// Eight adjacent pixels of a row in lockstep ([`integrator::lockstep`]), AVX2 lane code
-    /// when the CPU has AVX2 and FMA, else the portable lane code. The default: with the
-    /// accel crate's packet queries it is ~20% faster per CPU second than [`TraceMode::Scalar`]
-    /// on the Cornell box (docs/perf-render.md).
-    #[default]
-    Lockstep,
-    /// [`TraceMode::Lockstep`] with the portable lane code even on AVX2 CPUs (for tests and
-    /// comparisons).
-    LockstepPortable,
-    /// One path at a time ([`integrator::path::li`]), the reference.
-    Scalar,
-}
-
 /// A scene ready to render.
 pub struct Renderer {
     pub(crate) scene: Scene,
@@ -76,7 +62,8 @@ pub struct Renderer {
     pub(crate) camera: PinholeCamera,
     /// The frame shown and the one before it ([`crate::frame`]).
     pub(crate) frame: FrameState,
-    integrator: IntegratorKind,
+    /// Prepared for the current frame (`prepare_integrator`).
+    integrator: Box<dyn Integrator>,
     trace_mode: TraceMode,
     ray_queries: RayQueries,
     build_seconds: f64,
@@ -112,7 +99,7 @@ impl Renderer {
             lockstep_tables,
             camera,
             frame,
-            integrator: IntegratorKind::Path,
+            integrator: Box::new(PathIntegrator),
             trace_mode: TraceMode::default(),
             ray_queries: RayQueries::default(),
             build_seconds,
@@ -132,14 +119,51 @@ impl Renderer {
         Ok(())
     }
 
-    /// Switches the estimator (the BSDF-only one is for tests and comparisons).
-    pub fn with_integrator(mut self, kind: IntegratorKind) -> Self {
-        self.integrator = kind;
+    /// Renders with `integrator` (prepared here for the current frame, and again at every
+    /// frame update): the path tracer by default, [`IntegratorKind::BsdfOnly`] for tests,
+    /// or another crate's (the many-light renderer).
+    pub fn with_integrator(mut self, integrator: impl Integrator + 'static) -> Self {
+        self.set_integrator(Box::new(integrator));
         self
     }
 
+    /// [`Renderer::with_integrator`] on a renderer in place.
+    pub fn set_integrator(&mut self, integrator: Box<dyn Integrator>) {
+        self.integrator = integrator;
+        self.prepare_integrator();
+    }
+
+    /// The integrator, for what it reports besides the film.
+    pub fn integrator(&self) -> &dyn Integrator {
+        &*self.integrator
+    }
+
+    /// The integrator as its own type, when it is a `T`.
+    pub fn integrator_as<T: Integrator + 'static>(&self) -> Option<&T> {
+        (*self.integrator).as_any().downcast_ref()
+    }
+
+    /// Runs the integrator's per-frame [`Integrator::prepare`] on the current world and
+    /// camera; every frame update calls it ([`crate::frame`]).
+    pub(crate) fn prepare_integrator(&mut self) {
+        let ctx = PathContext {
+            scene: &self.scene,
+            accel: &self.accel,
+            lights: &self.lights,
+            geometry: &self.geometry,
+        };
+        let frame = FrameContext {
+            ctx,
+            params: self.settings.path_params(),
+            camera: &self.camera,
+            frame: self.frame.desc.index,
+            seed: self.settings.seed,
+        };
+        self.integrator.prepare(&frame);
+    }
+
     /// Switches between the lockstep and the scalar path tracer (same film; see
-    /// [`TraceMode`]). The BSDF-only integrator is always scalar.
+    /// [`TraceMode`]). Integrators without a lane version are always scalar.
     pub fn with_trace_mode(mut self, mode: TraceMode) -> Self {
         self.trace_mode = mode;
         self
@@ -215,14 +239,7 @@ impl Renderer {
         sampler.set_slot(SLOT_PIXEL);
         let jitter = sampler.next_2d();
         let ray = self.camera.sample_ray(x, y, index, jitter);
-        let ctx = self.context();
-        let params = self.path_params();
-        match self.integrator {
-            IntegratorKind::Path => integrator::path::li(&ctx, &params, &ray, &mut sampler, index == 0),
-            IntegratorKind::BsdfOnly => {
-                integrator::bsdf_only::li(&ctx, &params, &ray, &mut sampler, index == 0)
-            }
-        }
+        self.integrator.li(&self.context(), &self.path_params(), &ray, &mut sampler, index == 0)
     }
 
     /// Adds samples `[first_sample, first_sample + count)` of every pixel to `film`, in
@@ -255,142 +272,38 @@ impl Renderer {
         );
         let end = first_sample.saturating_add(count);
         let stopped = AtomicBool::new(false);
-        film.pixels_mut().par_chunks_mut(width * TILE_ROWS).enumerate().for_each(|(tile, pixels)| {
-            if !self.render_tile(tile * TILE_ROWS, pixels, first_sample, end, cancel) {
+        film.pixels_mut().par_chunks_mut(width * TILE_ROWS).enumerate().for_each(|(index, pixels)| {
+            let tile = self.tile(index, first_sample, end, cancel);
+            if !self.integrator.render_tile(&tile, pixels) {
                 stopped.store(true, Ordering::Relaxed);
                 return;
             }
             on_tile(pixels.len());
         });
-        !stopped.load(Ordering::Relaxed)
+        let finished = !stopped.load(Ordering::Relaxed);
+        self.integrator.end_pass(&PassEnd { first: first_sample, count, finished });
+        finished
     }
 
-    /// Renders samples `[first, end)` of the pixels of the band starting at row `y0`;
-    /// false when `cancel` stopped it (each pixel keeps the samples it has added).
-    fn render_tile(
-        &self,
-        y0: usize,
-        pixels: &mut [FilmPixel],
-        first: u32,
-        end: u32,
-        cancel: &AtomicBool,
-    ) -> bool {
-        if self.integrator == IntegratorKind::Path {
-            let mut stats = LaneStats::default();
-            let tile = TileJob { y0, first, end, cancel };
-            match self.trace_mode {
-                TraceMode::Lockstep => return self.render_tile_lockstep(&tile, pixels, &mut stats),
-                TraceMode::LockstepPortable => {
-                    return self.render_tile_lockstep_portable(&tile, pixels, &mut stats)
-                }
-                TraceMode::Scalar => {}
-            }
-        }
-        let width = self.settings.width as usize;
-        for (i, px) in pixels.iter_mut().enumerate() {
-            let (x, y) = ((i % width) as u32, (y0 + i / width) as u32);
-            // The pixel's hash is shared by its samples; the sums stay in a local copy (in
-            // registers) and are stored once, in the same order of additions as before.
-            let key = Sampler::pixel_key(x, y, self.settings.seed);
-            let mut acc = *px;
-            for index in first..end {
-                if cancel.load(Ordering::Relaxed) {
-                    *px = acc;
-                    return false;
-                }
-                let s = self.trace_sample_with(x, y, Sampler::from_pixel_key(key, index));
-                if let Some(surface) = s.surface {
-                    acc.surface = surface;
-                }
-                acc.add(&s.radiance.to_pixel_sample());
-            }
-            *px = acc;
-        }
-        true
-    }
-
-    /// [`Renderer::render_tile`] in lockstep, with the best lane code the CPU runs.
-    fn render_tile_lockstep(&self, tile: &TileJob, pixels: &mut [FilmPixel], stats: &mut LaneStats) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if filtrace_core::cpu::isa().has_avx2() {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.render_tile_lockstep_avx2(tile, pixels, stats) };
-        }
-        self.render_tile_lockstep_portable(tile, pixels, stats)
-    }
-
-    /// The lane code compiled for AVX2 + FMA (the same source; only instruction selection
-    /// differs, as Rust never contracts into FMAs).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn render_tile_lockstep_avx2(
-        &self,
-        tile: &TileJob,
-        pixels: &mut [FilmPixel],
-        stats: &mut LaneStats,
-    ) -> bool {
-        self.lockstep_tile::<true>(tile, pixels, stats)
-    }
-
-    /// The portable lane code.
-    fn render_tile_lockstep_portable(
-        &self,
-        tile: &TileJob,
-        pixels: &mut [FilmPixel],
-        stats: &mut LaneStats,
-    ) -> bool {
-        self.lockstep_tile::<false>(tile, pixels, stats)
-    }
-
-    /// Pools of [`POOL`] adjacent pixels of each row, one sample index at a time; each
-    /// pixel adds its samples in index order, as in the scalar tile loop, so the film is
-    /// the same bit for bit. False when `tile.cancel` stopped it.
-    #[inline(always)]
-    fn lockstep_tile<const AVX2: bool>(
-        &self,
-        tile: &TileJob,
-        pixels: &mut [FilmPixel],
-        stats: &mut LaneStats,
-    ) -> bool {
-        let TileJob { y0, first, end, cancel } = *tile;
-        let width = self.settings.width as usize;
-        let lc = LockstepContext {
+    /// Tile `index` (rows from `index * TILE_ROWS`) of a pass of samples `[first, end)`.
+    fn tile<'a>(&'a self, index: usize, first: u32, end: u32, cancel: &'a AtomicBool) -> Tile<'a> {
+        Tile {
             ctx: self.context(),
-            tables: &self.lockstep_tables,
             params: self.path_params(),
             camera: &self.camera,
-            queries: self.ray_queries,
-        };
-        let mut pool = Pool::default();
-        let mut out = [CameraSample::default(); POOL];
-        for (row, row_pixels) in pixels.chunks_mut(width).enumerate() {
-            let y = (y0 + row) as u32;
-            for (c, chunk) in row_pixels.chunks_mut(POOL).enumerate() {
-                let x0 = (c * POOL) as u32;
-                let n = chunk.len();
-                let keys: [u32; POOL] =
-                    std::array::from_fn(|j| Sampler::pixel_key(x0 + j as u32, y, self.settings.seed));
-                for index in first..end {
-                    // One relaxed load per pool of paths: negligible, and bounds how long a
-                    // Ctrl-C waits whatever the pass size.
-                    if cancel.load(Ordering::Relaxed) {
-                        return false;
-                    }
-                    lockstep::trace_pool::<AVX2>(&lc, x0, y, &keys, n, index, &mut pool, stats, &mut out);
-                    for (px, s) in chunk.iter_mut().zip(out.iter()) {
-                        if let Some(surface) = s.surface {
-                            px.surface = surface;
-                        }
-                        px.add(&s.radiance.to_pixel_sample());
-                    }
-                }
-            }
+            seed: self.settings.seed,
+            width: self.settings.width as usize,
+            y0: index * TILE_ROWS,
+            index,
+            first,
+            end,
+            cancel,
+            lanes: Lanes { tables: &self.lockstep_tables, mode: self.trace_mode, queries: self.ray_queries },
         }
-        true
     }
 
     /// What the lockstep tracer reads for this renderer's scene, camera and settings (for
-    /// tracers of other rays, such as the filtered pipeline's, [`lockstep::trace_film_rays`]).
+    /// tracers of other rays, such as the filtered pipeline's, [`crate::integrator::lockstep::trace_film_rays`]).
     pub fn lockstep_context(&self) -> LockstepContext<'_> {
         LockstepContext {
             ctx: self.context(),
@@ -408,10 +321,10 @@ impl Renderer {
         let mut stats = LaneStats::default();
         let width = self.settings.width as usize;
         let never = AtomicBool::new(false);
-        for (tile, pixels) in film.pixels_mut().chunks_mut(width * TILE_ROWS).enumerate() {
-            let job =
-                TileJob { y0: tile * TILE_ROWS, first, end: first.saturating_add(count), cancel: &never };
-            self.render_tile_lockstep(&job, pixels, &mut stats);
+        for (index, pixels) in film.pixels_mut().chunks_mut(width * TILE_ROWS).enumerate() {
+            let mut tile = self.tile(index, first, first.saturating_add(count), &never);
+            tile.lanes.mode = TraceMode::Lockstep;
+            tiles::lockstep_tile(&tile, pixels, &mut stats);
         }
         stats
     }
@@ -422,16 +335,6 @@ impl Renderer {
         self.render_pass(&mut film, 0, self.settings.spp, cancel);
         film
     }
-}
-
-/// One tile's work: samples `[first, end)` of the band starting at row `y0`, stopped
-/// when `cancel` is set.
-#[derive(Clone, Copy)]
-struct TileJob<'a> {
-    y0: usize,
-    first: u32,
-    end: u32,
-    cancel: &'a AtomicBool,
 }
 
 /// The passes of a progressive render of `spp` samples per pixel, as `(first_sample,
@@ -486,6 +389,7 @@ pub fn render_bench(renderer: &Renderer, threads: usize) -> BenchResult {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::film::FilmPixel;
     use std::sync::{mpsc, Arc};
     use std::time::Duration;
 

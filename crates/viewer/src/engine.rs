@@ -21,6 +21,7 @@ use std::time::Instant;
 use filtrace_adaptive::AdaptiveParams;
 use filtrace_core::Image;
 use filtrace_pipeline::{FilterChoice, FilteredRenderer, IndirectFilter, PipelineSettings, RenderSource};
+use filtrace_render::integrator::PathIntegrator;
 use filtrace_render::{Film, RenderSettings, Renderer};
 use filtrace_scene::{Camera, Scene};
 use filtrace_vpl::vpls::{render_vpl_frame, VplParams, VplSettings};
@@ -251,8 +252,12 @@ impl Engine {
         let count = choice.spp_per_frame.max(1).min(limit - acc.spp);
         let t0 = Instant::now();
         let done = match choice.still {
-            StillRenderer::PathTracer => renderer.render_pass(&mut acc.film, acc.spp, count, cancel),
-            StillRenderer::Vpl => vpl_pass(renderer, &mut acc, count, cancel)?,
+            StillRenderer::PathTracer => {
+                self.pipeline.source().renderer().render_pass(&mut acc.film, acc.spp, count, cancel)
+            }
+            StillRenderer::Vpl => {
+                vpl_pass(self.pipeline.source_mut().renderer_mut(), &mut acc, count, cancel)?
+            }
         };
         if !done {
             return Ok(None);
@@ -286,16 +291,16 @@ pub(crate) fn still_limit(choice: &RenderChoice) -> u32 {
 /// vpl`'s defaults: 2048 VPLs, 2048 cache points, the optimised sampler); false when
 /// cancelled.
 fn vpl_pass(
-    renderer: &Renderer,
+    renderer: &mut Renderer,
     acc: &mut Accumulation,
     count: u32,
     cancel: &AtomicBool,
 ) -> Result<bool, String> {
-    let settings = VplSettings {
-        vpls: VplParams { seed: renderer.settings().seed, ..VplParams::with_count(2048) },
-        ..VplSettings::default()
-    };
-    let Some(frame) = render_vpl_frame(renderer, &settings, count, cancel)? else { return Ok(false) };
+    let settings = VplSettings { vpls: VplParams::with_count(2048), ..VplSettings::default() };
+    let frame = render_vpl_frame(renderer, &settings, count, cancel);
+    // The moving frames and the path-traced stills go on with the path tracer.
+    renderer.set_integrator(Box::new(PathIntegrator));
+    let Some(frame) = frame? else { return Ok(false) };
     acc.film = frame.film;
     acc.cache_distance = Some(frame.cache_distance);
     Ok(true)

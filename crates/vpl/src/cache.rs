@@ -13,9 +13,10 @@
 //!    under `d(x0, x1) = |x0 − x1| + λ √(1 − n0·n1)`, then [`ImportanceCache::sample`]
 //!    returns a [`SamplePlan`]: the VPLs to evaluate (with visibility) and how to combine
 //!    them, `L ≈ offset + Σ weight_i · f(vpl_i)`;
-//! 4. `optimized` only: [`SamplePlan::feedback`] per evaluated draw, then
-//!    [`ImportanceCache::optimize`] takes one damped Newton step per record (He and Owen
-//!    2014, thesis 3.5 and 5.2.2).
+//! 4. `optimized` only: [`SamplePlan::feedback`] per evaluated draw, gathered over the
+//!    frame's passes in a [`SampleHistory`]; after each pass
+//!    [`ImportanceCache::optimize_history`] takes one damped Newton step per record (He and
+//!    Owen 2014, thesis 3.5 and 5.2.2).
 //!
 //! Samplers ([`SamplerKind`]): `uniform` (one VPL, pmf 1/N), `alpha-max` (multi-sample
 //! MIS, one draw per distribution, Georgiev's α-max heuristic), `balance` (one-sample
@@ -29,6 +30,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod alpha_max;
+mod history;
 mod optimize;
 mod placement;
 mod record;
@@ -40,6 +42,7 @@ mod vpl_set;
 mod tests;
 
 pub use alpha_max::{alpha_max_owner, alpha_max_weight};
+pub use history::{SampleHistory, StoredSample};
 pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, SampleFeedback, StepOutcome};
 pub use placement::{place_cache_points, GBufferView};
 pub use record::{CacheRecord, ImportanceCache, VplCdf};

@@ -9,8 +9,11 @@
 //!   singularity (thesis 4.2.3, [`GeometryBound`]).
 //! - [`exhaustive`]: the ground truth the importance cache is measured against, every VPL
 //!   with exact visibility at every pixel, and the cache's [`crate::cache::VplSet`] view.
-//! - [`integrator`]: one frame: VPLs, G-buffer, importance cache, shading with a sampler,
-//!   the optimisation step; the d-distance layer of the thesis's Figure 27.
+//! - [`integrator`]: the many-light integrator of the per-frame renderer: VPLs, G-buffer
+//!   and importance cache in its `prepare`, shading with a sampler per camera sample, the
+//!   optimisation step after each pass; the d-distance layer of the thesis's Figure 27.
+//! - [`seam`]: plugging it into a [`filtrace_render::Renderer`] and rendering a frame in
+//!   progressive passes ([`render_vpl_frame`], [`render_vpl_passes`]).
 //! - [`rays`]: shadow rays counted (and sampled for replay) for the experiments' clocks.
 //!
 //! A VPL's `weight` already holds every Monte Carlo normalisation (selection probability,
@@ -31,8 +34,8 @@ mod tests;
 pub use eval::{GeometryBound, Receiver};
 pub use exhaustive::{exhaustive_pixel, render_exhaustive, ExhaustiveImage, SceneVpls};
 pub use generate::{generate_vpls, VplParams};
-pub use integrator::{render_vpl_frame, StageTimes, VplFrame, VplSettings};
-pub use seam::{VplEstimator, VplIntegrator};
+pub use integrator::{frame_vpl_seed, StageTimes, VplIntegrator, VplReport, VplSettings};
+pub use seam::{collect_frame, render_vpl_frame, render_vpl_passes, use_vpl_integrator, VplFrame};
 
 use filtrace_core::sampling::Frame;
 use filtrace_core::{Rgb, Vec3};

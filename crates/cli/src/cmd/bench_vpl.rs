@@ -55,7 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_depth: 8,
         seed: 0,
     };
-    let renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let samplers: Vec<SamplerKind> = if args.samplers.is_empty() {
         SamplerKind::ALL.to_vec()
     } else {
@@ -76,7 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let mut frames = Vec::new();
         for _ in 0..args.repeat.max(1) {
-            let frame = render_vpl_frame(&renderer, &vs, args.spp, &cancel)
+            let frame = render_vpl_frame(&mut renderer, &vs, args.spp, &cancel)
                 .map_err(|e| anyhow::anyhow!(e))?
                 .ok_or_else(|| anyhow::anyhow!("cancelled"))?;
             frames.push(frame);

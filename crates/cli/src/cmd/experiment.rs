@@ -314,7 +314,7 @@ mod tests {
                 let spec = ExperimentSpec::load(&p).unwrap_or_else(|e| panic!("{e}"));
                 for m in &spec.methods {
                     if let Some(vm) = spec.vpl_method(m) {
-                        super::super::experiment_vpl::vpl_settings(&vm, spec.seed, 1.0)
+                        super::super::experiment_vpl::vpl_settings(&vm, 1.0)
                             .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
                         continue;
                     }

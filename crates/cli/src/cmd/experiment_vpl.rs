@@ -30,7 +30,8 @@ use filtrace_render::{RenderSettings, Renderer};
 use filtrace_scene::Scene;
 use filtrace_vpl::cache::DistributionSet;
 use filtrace_vpl::vpls::{
-    generate_vpls, rays, render_exhaustive, render_vpl_frame, VplFrame, VplSettings, Vpls,
+    frame_vpl_seed, generate_vpls, rays, render_exhaustive, render_vpl_frame, VplFrame, VplParams,
+    VplSettings, Vpls,
 };
 use rayon::prelude::*;
 
@@ -41,12 +42,12 @@ pub const KEEP_EVERY: u64 = 8;
 
 /// One VPL frame of `spp` samples per pixel, as `filtrace render --integrator vpl`
 /// renders it: the one entry point of the experiments into the renderer.
-pub fn render_frame(renderer: &Renderer, settings: &VplSettings, spp: u32) -> Result<VplFrame, String> {
+pub fn render_frame(renderer: &mut Renderer, settings: &VplSettings, spp: u32) -> Result<VplFrame, String> {
     render_vpl_frame(renderer, settings, spp, &AtomicBool::new(false))?.ok_or_else(|| "cancelled".to_string())
 }
 
 /// The renderer's settings of `m`, through the CLI's own options.
-pub fn vpl_settings(m: &VplMethod, seed: u64, scene_radius: f32) -> Result<VplSettings, String> {
+pub fn vpl_settings(m: &VplMethod, scene_radius: f32) -> Result<VplSettings, String> {
     #[derive(Parser)]
     struct Cli {
         #[command(flatten)]
@@ -55,7 +56,7 @@ pub fn vpl_settings(m: &VplMethod, seed: u64, scene_radius: f32) -> Result<VplSe
     let args = cli_args(m);
     let cli = Cli::try_parse_from(std::iter::once("filtrace".to_string()).chain(args.iter().cloned()))
         .map_err(|e| format!("{}: {e}", args.join(" ")))?;
-    let mut s = cli.vpl.settings(seed, scene_radius).map_err(|e| format!("{e:#}"))?;
+    let mut s = cli.vpl.settings(scene_radius).map_err(|e| format!("{e:#}"))?;
     s.cache.distributions = DistributionSet::first(m.distributions as usize - 1);
     s.cache.validate()?;
     Ok(s)
@@ -127,8 +128,11 @@ impl VplBackend {
             let st = pool.install(|| -> Result<SceneState, String> {
                 let renderer = Renderer::new(scene, settings).map_err(|e| e.to_string())?;
                 let vs = truth_settings(spec, &renderer)?;
-                let vpls =
-                    fingerprint(&generate_vpls(&renderer.context(), &renderer.path_params(), &vs.vpls));
+                let vpls = fingerprint(&generate_vpls(
+                    &renderer.context(),
+                    &renderer.path_params(),
+                    &still_vpls(&vs, spec),
+                ));
                 let n = (spec.width * spec.height) as usize * 3;
                 Ok(SceneState { renderer, vpls, truth_sum: vec![0.0; n], truth_samples: 0 })
             })?;
@@ -177,7 +181,7 @@ impl VplBackend {
             let vs = truth_settings(spec, r)?;
             let film = pool
                 .install(|| {
-                    let vpls = generate_vpls(&r.context(), &r.path_params(), &vs.vpls);
+                    let vpls = generate_vpls(&r.context(), &r.path_params(), &still_vpls(&vs, spec));
                     render_exhaustive(
                         &r.context(),
                         r.camera(),
@@ -211,8 +215,8 @@ impl VplBackend {
     ) -> Result<MethodRun, String> {
         let pool = self.pool()?;
         let st = self.state(spec, name, scene)?;
-        let vs = vpl_settings(m, spec.seed, st.renderer.lights().scene_radius())?;
-        let (frame, clock) = pool.install(|| measured_frame(st, &vs, spp))?;
+        let vs = vpl_settings(m, st.renderer.lights().scene_radius())?;
+        let (frame, clock) = pool.install(|| measured_frame(&mut *st, &vs, spp))?;
         if fingerprint(&frame.vpls) != st.vpls {
             return Err(format!(
                 "scene {name}: the {} frame used other VPLs than the ground truth (generate_vpls with the same seed); the experiment cannot judge it",
@@ -236,17 +240,22 @@ impl VplBackend {
     }
 }
 
+/// The VPL parameters the integrator draws a still frame's VPLs with (frame 0).
+fn still_vpls(vs: &VplSettings, spec: &ExperimentSpec) -> VplParams {
+    VplParams { seed: frame_vpl_seed(vs.vpls.seed, spec.seed, 0), ..vs.vpls }
+}
+
 /// The VPL settings of the ground truth (the sampler does not matter: only the VPLs).
 fn truth_settings(spec: &ExperimentSpec, r: &Renderer) -> Result<VplSettings, String> {
     let m = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, None, None, None);
-    vpl_settings(&m, spec.seed, r.lights().scene_radius())
+    vpl_settings(&m, r.lights().scene_radius())
 }
 
 /// The frame with its shadow rays counted and a sample of them replayed alone.
-fn measured_frame(st: &SceneState, vs: &VplSettings, spp: u32) -> Result<(VplFrame, RayClock), String> {
+fn measured_frame(st: &mut SceneState, vs: &VplSettings, spp: u32) -> Result<(VplFrame, RayClock), String> {
     let (before, _) = rays::pool_counts();
     rays::record_every(KEEP_EVERY);
-    let frame = render_frame(&st.renderer, vs, spp);
+    let frame = render_frame(&mut st.renderer, vs, spp);
     rays::record_every(0);
     let (after, kept) = rays::pool_counts();
     let frame = frame?;
@@ -361,11 +370,11 @@ mod tests {
         assert_eq!(extended.data(), two.data());
         let settings =
             RenderSettings { width: 16, height: 16, spp: 2, max_depth: spec.max_depth, seed: spec.seed };
-        let r = Renderer::new(scene().unwrap(), settings).unwrap();
+        let mut r = Renderer::new(scene().unwrap(), settings).unwrap();
         let mut vs = truth_settings(&spec, &r).unwrap();
         vs.ground_truth = true;
         for (spp, mine) in [(1, &one), (2, &two)] {
-            let frame = render_frame(&r, &vs, spp).unwrap();
+            let frame = render_frame(&mut r, &vs, spp).unwrap();
             let theirs = frame.film.aovs().color;
             for (a, b) in mine.data().iter().zip(theirs.data()) {
                 assert!((a - b).abs() <= 1e-5 * b.abs().max(1e-3), "{spp} spp: {a} vs {b}");
@@ -400,9 +409,9 @@ mod tests {
             neighbours: 3,
             distributions: 2,
         };
-        let s = vpl_settings(&m, 5, 2.0).unwrap();
+        let s = vpl_settings(&m, 2.0).unwrap();
         assert_eq!(s.sampler, SamplerKind::BalanceCv);
-        assert_eq!((s.vpls.count, s.vpls.direct, s.vpls.seed), (1000, 125, 5));
+        assert_eq!((s.vpls.count, s.vpls.direct), (1000, 125));
         assert_eq!((s.cache.cache_points, s.cache.neighbours), (77, 3));
         assert_eq!(s.cache.distributions, DistributionSet::first(1));
         assert_eq!(s.vpls.bound, filtrace_vpl::vpls::GeometryBound::MinDistance(0.02));

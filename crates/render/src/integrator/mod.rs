@@ -11,10 +11,11 @@
 //! `color = direct + indirect` exactly (the colour is *defined* as that sum), as the filtered
 //! pipeline of Bauszat et al. 2011 needs them apart.
 //!
-//! The [`Integrator`] trait is the seam for more estimators: each frame first runs its
+//! The [`Integrator`] trait is the renderer's seam for estimators: each frame first runs its
 //! [`Integrator::prepare`] (a VPL renderer generates its virtual point lights there; the
-//! path tracers do nothing), then traces its pixels with [`Integrator::li`] (pbrt-v4
-//! `cpu/integrators.h`, whose integrators own their `Render()` passes).
+//! path tracers do nothing), then passes of tiles ([`Integrator::render_tile`]; by default
+//! [`Integrator::li`] per sample, [`tiles`]), each pass closed by [`Integrator::end_pass`]
+//! (pbrt-v4 `cpu/integrators.h`, whose integrators own their `Render()` passes).
 //!
 //! Path depth follows Mitsuba's `max_depth` convention: the number of path *segments*
 //! (camera segment included). 1 = emitters seen directly only, 2 = direct light only,
@@ -27,15 +28,21 @@ pub mod path;
 pub mod pool;
 pub mod sampler8;
 pub(crate) mod sampling8;
+pub mod tiles;
 
 use crate::bsdf::SurfaceBsdf;
-use crate::film::{PixelSample, VisibleSurface};
+use crate::camera::PinholeCamera;
+use crate::film::{FilmPixel, PixelSample, VisibleSurface};
 use crate::lights::LightSet;
 use crate::surface::{SceneGeometry, SurfaceInteraction};
 use filtrace_accel::SceneAccel;
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{Ray, Rgb};
 use filtrace_scene::Scene;
+use lockstep::LaneStats;
+use std::any::Any;
+use std::sync::atomic::AtomicBool;
+pub use tiles::{Lanes, TraceMode};
 
 /// Path-length and termination parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -118,28 +125,77 @@ impl<'a> PathContext<'a> {
     }
 }
 
-/// What an integrator's per-frame preparation sees: the frame's world and its number.
+/// What an integrator's per-frame preparation sees: the frame's world, camera and number.
 #[derive(Clone, Copy)]
 pub struct FrameContext<'a> {
     pub ctx: PathContext<'a>,
     pub params: PathParams,
+    /// The frame's camera at the image's resolution.
+    pub camera: &'a PinholeCamera,
     /// Frame number of an animation (0 for a still).
-    pub frame: u32,
+    pub frame: i64,
     /// The render's seed (random numbers of `prepare` derive from it and `frame`).
     pub seed: u64,
 }
 
-/// An estimator of the radiance along camera rays, with a per-frame preparation step.
-pub trait Integrator: Sync {
+/// One tile of a pass (pbrt-v4's image tile): the rows `y0..` of the film held by the
+/// pixels handed over with it, samples `first..end` of each.
+#[derive(Clone, Copy)]
+pub struct Tile<'a> {
+    pub ctx: PathContext<'a>,
+    pub params: PathParams,
+    pub camera: &'a PinholeCamera,
+    pub seed: u64,
+    /// Image width; the tile's pixels are whole rows of it.
+    pub width: usize,
+    pub y0: usize,
+    /// Position of the tile in the pass, top to bottom: a key for results that must be
+    /// combined in a fixed order whatever the thread count.
+    pub index: usize,
+    pub first: u32,
+    pub end: u32,
+    /// Polled between samples: the tile stops when it is set.
+    pub cancel: &'a AtomicBool,
+    /// How the path tracer may run in lockstep.
+    pub lanes: Lanes<'a>,
+}
+
+/// How a pass ended, for [`Integrator::end_pass`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassEnd {
+    pub first: u32,
+    pub count: u32,
+    /// False when `cancel` cut the pass short (tiles then hold different sample counts).
+    pub finished: bool,
+}
+
+/// Lets [`crate::Renderer::integrator_as`] find an integrator's own type behind the trait
+/// object (blanket-implemented; trait upcasting needs Rust 1.86, the workspace supports 1.80).
+pub trait AsAny {
+    fn as_any(&self) -> &dyn Any;
+}
+
+impl<T: Any> AsAny for T {
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// An estimator of the radiance along camera rays with a per-frame life cycle (pbrt-v4
+/// `cpu/integrators.h`): [`Integrator::prepare`] once per frame, then passes of tiles
+/// ([`Integrator::render_tile`], by default [`Integrator::li`] per sample), each pass
+/// followed by [`Integrator::end_pass`]. Other crates plug theirs in with
+/// [`crate::Renderer::with_integrator`].
+pub trait Integrator: AsAny + Send + Sync {
     /// Work done once per frame before any pixel is traced, for the world of `frame`
-    /// (after its instances and lights moved). Default: nothing.
+    /// (after its instances, lights and camera moved). Default: nothing.
     fn prepare(&mut self, frame: &FrameContext) {
         let _ = frame;
     }
 
     /// The camera sample along `ray` (unit direction): radiance split at the first bounce
     /// and, when `want_surface`, the visible surface. `sampler` is the pixel's, for this
-    /// sample index.
+    /// sample index, after the pixel jitter.
     fn li(
         &self,
         ctx: &PathContext,
@@ -148,9 +204,27 @@ pub trait Integrator: Sync {
         sampler: &mut Sampler,
         want_surface: bool,
     ) -> CameraSample;
+
+    /// Adds the tile's samples to `pixels` (whole rows from `tile.y0`), each pixel's in
+    /// index order; false when `tile.cancel` stopped it. Default: [`tiles::trace_tile`]
+    /// over [`Integrator::li`]. Overridden by executors of the same estimator (the path
+    /// tracer's lockstep pools) and by integrators that learn from their samples.
+    fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
+        tiles::trace_tile(tile, pixels, |ray, sampler, want| {
+            self.li(&tile.ctx, &tile.params, ray, sampler, want)
+        })
+    }
+
+    /// Called after every tile of a pass has returned. `&self` because passes share the
+    /// integrator between threads: one that adapts between passes (the importance cache's
+    /// optimiser) keeps what it learns behind its own lock. Default: nothing.
+    fn end_pass(&self, pass: &PassEnd) {
+        let _ = pass;
+    }
 }
 
-/// The path tracer of [`path`] (next-event estimation + MIS); nothing to prepare.
+/// The path tracer of [`path`] (next-event estimation + MIS); nothing to prepare. Its
+/// tiles run in lockstep unless the renderer's [`TraceMode`] is `Scalar`.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PathIntegrator;
 
@@ -166,9 +240,18 @@ impl Integrator for PathIntegrator {
     ) -> CameraSample {
         path::li(ctx, params, ray, sampler, want)
     }
+
+    fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
+        match tile.lanes.mode {
+            TraceMode::Scalar => tiles::trace_tile(tile, pixels, |ray, sampler, want| {
+                path::li(&tile.ctx, &tile.params, ray, sampler, want)
+            }),
+            _ => tiles::lockstep_tile(tile, pixels, &mut LaneStats::default()),
+        }
+    }
 }
 
-/// The BSDF-sampling reference of [`bsdf_only`]; nothing to prepare.
+/// The BSDF-sampling reference of [`bsdf_only`]; nothing to prepare, always scalar.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BsdfOnlyIntegrator;
 
@@ -186,8 +269,8 @@ impl Integrator for BsdfOnlyIntegrator {
     }
 }
 
-/// Which estimator a pass uses: the renderer's built-in choice, dispatched without `dyn`
-/// (a closed set).
+/// The built-in integrators by name (for options and tests); each variant runs as the
+/// integrator it names.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum IntegratorKind {
     /// Next-event estimation + MIS ([`path`]).
@@ -210,6 +293,13 @@ impl Integrator for IntegratorKind {
         match self {
             Self::Path => PathIntegrator.li(ctx, params, ray, sampler, want),
             Self::BsdfOnly => BsdfOnlyIntegrator.li(ctx, params, ray, sampler, want),
+        }
+    }
+
+    fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
+        match self {
+            Self::Path => PathIntegrator.render_tile(tile, pixels),
+            Self::BsdfOnly => BsdfOnlyIntegrator.render_tile(tile, pixels),
         }
     }
 }
@@ -318,50 +408,77 @@ impl VertexSamples {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::renderer::{IntegratorKind, RenderSettings, Renderer};
+    use crate::renderer::{RenderSettings, Renderer};
+    use std::sync::atomic::{AtomicU32, Ordering};
 
-    /// An integrator whose `li` depends on what `prepare` computed from the frame (as a
-    /// VPL renderer's lights do).
-    struct Prepared(Option<Rgb>);
+    /// A plug-in integrator whose `li` gives what `prepare` computed from the frame (as a
+    /// VPL renderer's lights do), and which counts the passes it was told about.
+    #[derive(Default)]
+    struct Prepared {
+        value: Option<Rgb>,
+        prepared: u32,
+        passes: AtomicU32,
+    }
 
     impl Integrator for Prepared {
         fn prepare(&mut self, frame: &FrameContext) {
-            self.0 = Some(Rgb::splat(frame.ctx.lights.len() as f32 * (frame.frame + 1) as f32));
+            let size = frame.camera.width() as f32;
+            self.value = Some(Rgb::splat(frame.ctx.lights.len() as f32 * (frame.frame + 1) as f32 + size));
+            self.prepared += 1;
         }
         fn li(&self, _: &PathContext, _: &PathParams, _: &Ray, _: &mut Sampler, _: bool) -> CameraSample {
-            let direct = self.0.expect("prepare runs before li");
+            let direct = self.value.expect("prepare runs before li");
             CameraSample { radiance: Split { direct, indirect: Rgb::ZERO }, surface: None }
+        }
+        fn end_pass(&self, pass: &PassEnd) {
+            assert!(pass.finished);
+            self.passes.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    /// The built-in integrators through the trait give what their functions give (their
-    /// `prepare` is a no-op), and a prepared integrator sees the frame it was prepared for.
+    /// The built-in integrators through the trait give what the renderer gives with them.
     #[test]
-    fn integrators_through_the_trait() {
+    fn built_in_integrators_through_the_trait() {
         let scene = filtrace_scene::builtin("cornell").unwrap();
         let settings = RenderSettings { width: 8, height: 8, spp: 1, max_depth: 8, seed: 1 };
         let r = Renderer::new(scene, settings.clone()).unwrap();
         let (ctx, params) = (r.context(), r.path_params());
-        let frame = FrameContext { ctx, params, frame: 0, seed: 1 };
         for kind in [IntegratorKind::Path, IntegratorKind::BsdfOnly] {
             let reference = Renderer::new(r.scene().clone(), settings.clone()).unwrap().with_integrator(kind);
-            let mut integrator = kind;
-            integrator.prepare(&frame);
-            assert_eq!(integrator, kind);
             for (x, y) in [(3, 4), (0, 0), (7, 2)] {
                 let want = reference.trace_sample(x, y, 0);
                 let mut sampler = r.sampler(x, y, 0);
                 sampler.set_slot(SLOT_PIXEL);
                 let ray = r.camera().sample_ray(x, y, 0, sampler.next_2d());
-                assert_eq!(integrator.li(&ctx, &params, &ray, &mut sampler, true), want, "{kind:?}");
+                assert_eq!(kind.li(&ctx, &params, &ray, &mut sampler, true), want, "{kind:?}");
             }
         }
-        let mut prepared = Prepared(None);
-        let ray = Ray::new(filtrace_core::Vec3::ZERO, filtrace_core::Vec3::Y);
-        for f in 0..3 {
-            prepared.prepare(&FrameContext { frame: f, ..frame });
-            let s = prepared.li(&ctx, &params, &ray, &mut r.sampler(0, 0, 0), false);
-            assert_eq!(s.radiance.direct, Rgb::splat(ctx.lights.len() as f32 * (f + 1) as f32));
+    }
+
+    /// A plug-in integrator is prepared when it is set (a still render needs no frame
+    /// update) and again at every frame update, before its pixels are traced, and hears the
+    /// end of every pass.
+    #[test]
+    fn the_renderer_drives_a_plug_in_integrator() {
+        let scene = filtrace_scene::builtin("cornell").unwrap();
+        let settings = RenderSettings { width: 8, height: 4, spp: 1, max_depth: 8, seed: 1 };
+        let mut r = Renderer::new(scene, settings).unwrap().with_integrator(Prepared::default());
+        let lights = r.lights().len() as f32;
+        let cancel = AtomicBool::new(false);
+        for (frame, want_prepared) in [(None, 1), (Some(2), 2), (Some(5), 3)] {
+            if let Some(f) = frame {
+                r.prepare_frame(f).unwrap();
+            }
+            let mut film = r.new_film();
+            assert!(r.render_pass(&mut film, 0, 1, &cancel) && r.render_pass(&mut film, 1, 2, &cancel));
+            let want = lights * (frame.unwrap_or(0) + 1) as f32 + 8.0;
+            assert_eq!(film.aovs().color.mean(), [want as f64; 3], "frame {frame:?}");
+            let p = r.integrator_as::<Prepared>().expect("the integrator set");
+            assert_eq!(p.prepared, want_prepared);
+            assert_eq!(p.passes.swap(0, Ordering::Relaxed), 2);
         }
+        assert!(r.integrator_as::<PathIntegrator>().is_none());
+        r.set_resolution(16, 4).unwrap();
+        assert_eq!(r.integrator_as::<Prepared>().unwrap().value, Some(Rgb::splat(lights * 6.0 + 16.0)));
     }
 }

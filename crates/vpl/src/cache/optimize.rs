@@ -19,15 +19,27 @@
 //!
 //! `f'(α', β) = G − ρ Σ_k log(α'_k − ε_k) − ρ log(1 − Σ_k α'_k)`, `ρ = barrier · G`,
 //!
-//! (ρ relative to G keeps the barrier's pull independent of the scene's brightness). One
-//! damped Newton step per record per frame: the Newton direction, then backtracking (t =
-//! 1, 1/2, ..., 1/512 of the largest step that stays 99 % inside the domain) on the same
-//! samples' estimate of f' until the Armijo condition holds (Boyd and Vandenberghe 9.5);
-//! no step if none does.
+//! (ρ relative to G keeps the barrier's pull independent of the scene's brightness).
+//!
+//! The samples are those a record has accumulated over the frame's passes
+//! ([`SampleHistory`]), each with its own `1/q0`, so G and its derivatives are estimated at
+//! the *current* parameters from every sample so far. One damped Newton step per record
+//! per pass (the thesis: per frame):
+//! - no step before the record's samples reach an effective count `(Σ w)² / Σ w²` of
+//!   [`OptimizerParams::min_samples`] (a Newton step fitted to about as many samples as
+//!   there are variables follows their noise: the previous one-pass version, stepping on
+//!   ~8 samples per record, doubled the relMSE of `balance-cv`);
+//! - the Newton direction is cut to a trust region (no α' moves more than
+//!   `max_alpha_step`, no β more than `max_beta_step` per step);
+//! - backtracking (t = 1, 1/2, ..., 1/512 of the largest step that stays 99 % inside the
+//!   domain) on the samples' estimate of f' until the Armijo condition holds (Boyd and
+//!   Vandenberghe 9.5) *and* the estimated G does not grow; no step if none does. So a
+//!   step never raises the estimated objective.
 
 // Index loops over the small matrices read as the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+use super::history::{SampleHistory, StoredSample};
 use super::search::Neighbours;
 use super::{CacheParams, DistributionSet, ImportanceCache, MAX_NEIGHBOURS, TECHNIQUES};
 use filtrace_core::{luminance, Rgb};
@@ -54,14 +66,29 @@ pub struct OptimizerParams {
     /// Barrier strength ρ relative to the objective G. The optimum sits about
     /// `barrier` from `Σ α' = 1` (relatively) and a comparable distance above each ε_k.
     pub barrier: f32,
-    /// A record whose samples' weights sum to less keeps its parameters this frame:
-    /// a Newton step from a handful of samples is noise.
-    pub min_weight: f32,
+    /// A record whose accumulated samples have a smaller effective count `(Σ w)² / Σ w²`
+    /// keeps its parameters: a Newton step from a handful of samples is noise. 32: four
+    /// samples per variable of the four-distribution problem (8 variables).
+    pub min_samples: f32,
+    /// Trust region: the largest change of any α' in one step.
+    pub max_alpha_step: f32,
+    /// Trust region: the largest change of any β in one step (β is dimensionless, ~1).
+    pub max_beta_step: f32,
+    /// Samples a record keeps over a frame's passes (a uniform reservoir beyond it):
+    /// 256 × 44 bytes × 2048 records = 23 MB at most.
+    pub history: usize,
 }
 
 impl Default for OptimizerParams {
     fn default() -> Self {
-        OptimizerParams { min_alpha: [0.02, 0.02, 0.02, 0.05], barrier: 1e-3, min_weight: 4.0 }
+        OptimizerParams {
+            min_alpha: [0.02, 0.02, 0.02, 0.05],
+            barrier: 1e-3,
+            min_samples: 32.0,
+            max_alpha_step: 0.1,
+            max_beta_step: 0.25,
+            history: 256,
+        }
     }
 }
 
@@ -78,8 +105,16 @@ impl OptimizerParams {
         if !(self.barrier.is_finite() && self.barrier > 0.0) {
             return Err(format!("optimizer barrier {} (expected > 0)", self.barrier));
         }
-        if !(self.min_weight.is_finite() && self.min_weight >= 0.0) {
-            return Err(format!("optimizer minimum sample weight {} (expected >= 0)", self.min_weight));
+        if !(self.min_samples.is_finite() && self.min_samples >= 0.0) {
+            return Err(format!("optimizer minimum effective samples {} (expected >= 0)", self.min_samples));
+        }
+        for (name, v) in [("alpha", self.max_alpha_step), ("beta", self.max_beta_step)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("optimizer largest {name} step {v} (expected > 0)"));
+            }
+        }
+        if self.history == 0 {
+            return Err("optimizer history of 0 samples per record (expected >= 1)".into());
         }
         Ok(())
     }
@@ -102,16 +137,20 @@ pub(crate) fn prior_beta(set: &DistributionSet) -> [f32; TECHNIQUES] {
 }
 
 impl RecordParams {
-    /// The a priori start: `α' = ε + 0.95 (1 − Σ ε) · prior mixture`, β from
-    /// `prior_beta`: the `balance-cv` sampler's choice up to the ε shift.
+    /// The a priori start: `α' = 0.95 · prior mixture` where that clears every bound ε_k
+    /// (then `optimized` samples exactly as `balance-cv` until its first step), else
+    /// `α' = ε + 0.95 (1 − Σ ε) · prior mixture`; β from `prior_beta`.
     pub fn prior(config: &CacheParams) -> Self {
         let eps = config.optimizer.min_alpha;
         let set = config.distributions;
-        let free = 1.0 - set.techniques().map(|t| eps[t as usize]).sum::<f32>();
         let mix = config.prior_mixture();
         let mut alpha = [0.0; TECHNIQUES];
-        for t in set.techniques() {
-            alpha[t as usize] = eps[t as usize] + 0.95 * free * mix[t as usize];
+        if set.techniques().all(|t| 0.95 * mix[t as usize] > eps[t as usize]) {
+            set.techniques().for_each(|t| alpha[t as usize] = 0.95 * mix[t as usize]);
+        } else {
+            let free = 1.0 - set.techniques().map(|t| eps[t as usize]).sum::<f32>();
+            set.techniques()
+                .for_each(|t| alpha[t as usize] = eps[t as usize] + 0.95 * free * mix[t as usize]);
         }
         RecordParams { alpha, beta: prior_beta(&set) }
     }
@@ -217,39 +256,27 @@ pub struct StepOutcome {
 }
 
 impl ImportanceCache {
-    /// One damped Newton step per record from this frame's feedback (see the module
-    /// docs). `feedback` must come in a fixed order (e.g. pixel order, draws in order):
-    /// the records then see their samples in that order, and the result does not
-    /// depend on the thread count.
+    /// One damped Newton step per record from `feedback` alone (a history of one pass; see
+    /// [`ImportanceCache::optimize_history`]). `feedback` must come in a fixed order (e.g.
+    /// pixel order, draws in order): the result then does not depend on the thread count.
     pub fn optimize(&mut self, feedback: &[SampleFeedback]) -> OptimizeStats {
+        let mut history = SampleHistory::new(self.records.len(), usize::MAX);
+        history.add(feedback);
+        self.optimize_history(&history)
+    }
+
+    /// One damped Newton step per record on every sample it has accumulated (see the
+    /// module docs). A history of another cache's size changes nothing.
+    pub fn optimize_history(&mut self, history: &SampleHistory) -> OptimizeStats {
         let n = self.records.len();
-        // Per-record lists of (feedback index, weight), in feedback order (CSR).
-        let mut start = vec![0usize; n + 1];
-        for fb in feedback {
-            for (l, _) in fb.records().filter(|&(l, w)| l < n && w > 0.0) {
-                start[l + 1] += 1;
-            }
-        }
-        for l in 0..n {
-            start[l + 1] += start[l];
-        }
-        let mut fill = start.clone();
-        let mut entries = vec![(0u32, 0.0f32); start[n]];
-        for (i, fb) in feedback.iter().enumerate() {
-            for (l, w) in fb.records().filter(|&(l, w)| l < n && w > 0.0) {
-                entries[fill[l]] = (i as u32, w);
-                fill[l] += 1;
-            }
+        if history.len() != n {
+            return OptimizeStats { kept: n, ..OptimizeStats::default() };
         }
         let set = self.config.distributions;
         let opt = &self.config.optimizer;
         let outcomes: Vec<StepOutcome> = (0..n)
             .into_par_iter()
-            .map(|l| {
-                let samples =
-                    entries[start[l]..start[l + 1]].iter().map(|&(i, w)| (&feedback[i as usize], w));
-                newton_step(&self.params[l], &set, opt, samples)
-            })
+            .map(|l| newton_step(&self.params[l], &set, opt, history.samples(l)))
             .collect();
         let mut stats = OptimizeStats::default();
         for (l, o) in outcomes.into_iter().enumerate() {
@@ -280,6 +307,8 @@ fn enabled(set: &DistributionSet) -> ([usize; TECHNIQUES], usize) {
 /// G's sample estimate with its gradient and Hessian over the 2J variables.
 struct Moments {
     weight: f64,
+    /// Σ w², for the effective count (Σ w)² / Σ w².
+    weight_sq: f64,
     objective: f64,
     gradient: [f64; MAX_VARS],
     hessian: [[f64; MAX_VARS]; MAX_VARS],
@@ -289,21 +318,24 @@ struct Moments {
 /// weighted samples, normalised by the weight sum:
 /// `∂G/∂α_k = −r² P_k / s²`, `∂G/∂β_k = −2 r Q_k / s`, `∂²G/∂α_k∂α_m = 2 r² P_k P_m / s³`,
 /// `∂²G/∂β_k∂β_m = 2 Q_k Q_m / s`, `∂²G/∂α_k∂β_m = 2 r P_k Q_m / s²`, each times `1/q0`.
-fn moments<'a>(x: &[f64], ts: &[usize], samples: impl Iterator<Item = (&'a SampleFeedback, f32)>) -> Moments {
+fn moments(x: &[f64], ts: &[usize], samples: &[StoredSample]) -> Moments {
     let j = ts.len();
     let mut m = Moments {
         weight: 0.0,
+        weight_sq: 0.0,
         objective: 0.0,
         gradient: [0.0; MAX_VARS],
         hessian: [[0.0; MAX_VARS]; MAX_VARS],
     };
-    for (fb, w) in samples {
+    for fb in samples {
+        let w = fb.weight;
         let p: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.pmf[ts[k]] as f64 } else { 0.0 });
         let q: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.cv[ts[k]] as f64 } else { 0.0 });
         let s: f64 = (0..j).map(|k| x[k] * p[k]).sum();
         let r = fb.value as f64 - (0..j).map(|k| x[j + k] * q[k]).sum::<f64>();
         let a = w as f64 * fb.inv_pdf as f64;
         m.weight += w as f64;
+        m.weight_sq += w as f64 * w as f64;
         if !(s > 0.0 && a.is_finite() && r.is_finite()) {
             continue;
         }
@@ -349,15 +381,12 @@ fn barrier(x: &[f64], eps: &[f64], rho: f64) -> f64 {
 
 /// One damped Newton step of record parameters `params` on the weighted samples (see
 /// the module docs). The samples are read twice (moments, then the line search).
-pub fn newton_step<'a, I>(
+pub fn newton_step(
     params: &RecordParams,
     set: &DistributionSet,
     opt: &OptimizerParams,
-    samples: I,
-) -> StepOutcome
-where
-    I: Iterator<Item = (&'a SampleFeedback, f32)> + Clone,
-{
+    samples: &[StoredSample],
+) -> StepOutcome {
     let keep =
         |g: f64| StepOutcome { params: *params, stepped: false, objective_before: g, objective_after: g };
     let (ts, j) = enabled(set);
@@ -369,9 +398,10 @@ where
         x[j + k] = params.beta[t] as f64;
     }
     let eps: Vec<f64> = ts.iter().map(|&t| opt.min_alpha[t] as f64).collect();
-    let m = moments(&x[..dim], ts, samples.clone());
+    let m = moments(&x[..dim], ts, samples);
     let g0 = m.objective;
-    if m.weight < opt.min_weight as f64
+    let effective = if m.weight_sq > 0.0 { m.weight * m.weight / m.weight_sq } else { 0.0 };
+    if effective < opt.min_samples as f64
         || !(g0 > 0.0 && g0.is_finite())
         || !barrier(&x, &eps, 1.0).is_finite()
     {
@@ -380,7 +410,8 @@ where
     let rho = opt.barrier as f64 * g0;
     let (mut grad, mut hess) = (m.gradient, m.hessian);
     add_barrier_derivatives(&x[..j], &eps, rho, &mut grad, &mut hess);
-    let Some(dx) = solve_newton(&hess, &grad, dim) else { return keep(g0) };
+    let Some(mut dx) = solve_newton(&hess, &grad, dim) else { return keep(g0) };
+    trust_region(&mut dx, j, opt);
     let decrement: f64 = -(0..dim).map(|i| grad[i] * dx[i]).sum::<f64>();
     if !(decrement > 0.0) {
         return keep(g0);
@@ -395,13 +426,13 @@ where
     let f0 = g0 + barrier(&x, &eps, rho);
     // The full step usually passes near the optimum: try it and its half first, and
     // replay the samples for the shorter steps only when both fail.
-    let mut values = objectives(&trials[..2], dim, ts, samples.clone());
+    let mut values = objectives(&trials[..2], dim, ts, samples);
     for (s, &t) in steps.iter().enumerate() {
         if s == values.len() {
-            values.extend(objectives(&trials[s..], dim, ts, samples.clone()));
+            values.extend(objectives(&trials[s..], dim, ts, samples));
         }
         let f = values[s] + barrier(&trials[s], &eps, rho);
-        if f.is_finite() && f <= f0 - ARMIJO * t * decrement {
+        if f.is_finite() && f <= f0 - ARMIJO * t * decrement && values[s] <= g0 {
             let mut out = *params;
             for (k, &tk) in ts.iter().enumerate() {
                 out.alpha[tk] = trials[s][k] as f32;
@@ -421,6 +452,16 @@ where
         }
     }
     keep(g0)
+}
+
+/// Shortens the Newton direction (α' then β, J each) so that no α' moves more than
+/// `max_alpha_step` and no β more than `max_beta_step`.
+fn trust_region(dx: &mut [f64; MAX_VARS], j: usize, opt: &OptimizerParams) {
+    let largest = |d: &[f64]| d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let scale = (opt.max_alpha_step as f64 / largest(&dx[..j]))
+        .min(opt.max_beta_step as f64 / largest(&dx[j..2 * j]))
+        .min(1.0);
+    dx.iter_mut().for_each(|d| *d *= scale);
 }
 
 /// The largest `t` (times [`TO_BOUNDARY`]) with `α' + t dα` inside `α'_k > ε_k`,
@@ -459,15 +500,11 @@ fn add_barrier_derivatives(
 }
 
 /// Sampled G at each trial point (same normalisation as [`moments`]).
-fn objectives<'a>(
-    trials: &[[f64; MAX_VARS]],
-    dim: usize,
-    ts: &[usize],
-    samples: impl Iterator<Item = (&'a SampleFeedback, f32)>,
-) -> Vec<f64> {
+fn objectives(trials: &[[f64; MAX_VARS]], dim: usize, ts: &[usize], samples: &[StoredSample]) -> Vec<f64> {
     let j = dim / 2;
     let (mut sums, mut weight) = (vec![0.0f64; trials.len()], 0.0f64);
-    for (fb, w) in samples {
+    for fb in samples {
+        let w = fb.weight;
         weight += w as f64;
         let a = w as f64 * fb.inv_pdf as f64;
         for (x, sum) in trials.iter().zip(sums.iter_mut()) {

@@ -1,32 +1,40 @@
-//! The many-light integrator of one frame (the thesis's listing 1, without the temporal
-//! steps): generate the VPLs (the per-frame `prepare`), trace the G-buffer, place and
-//! evaluate the importance cache, shade every pixel with the chosen VPL sampler, then
-//! (`optimized` only) one Newton step per record.
+//! The many-light integrator (the thesis's listing 1), an integrator of the per-frame
+//! renderer ([`filtrace_render::Renderer::with_integrator`]; [`super::seam`] runs it):
+//! - [`Integrator::prepare`], once per frame: generate the VPLs (seed from the VPL seed,
+//!   the render's seed and the frame number), trace the G-buffer through the pixel
+//!   centres, place the cache points and evaluate every VPL at them; the `optimized`
+//!   sampler's parameters are interpolated from the previous frame's cache;
+//! - per camera sample ([`Integrator::li`]): the emission seen directly plus the
+//!   sampler's estimate `offset + Σ weight_i · V_i contribution_i` of the VPL sum, or the
+//!   exhaustive sum (`ground_truth`). Draws of direct VPLs go to `direct`, the rest and the
+//!   control-variate offset to `indirect`, so `color = direct + indirect`;
+//! - `optimized` only: each tile keeps its draws' feedback; [`Integrator::end_pass`] adds
+//!   a finished pass's feedback, in tile order, to the records' [`SampleHistory`] and takes
+//!   one damped Newton step per record, so the next pass samples with the new parameters.
 //!
-//! Per camera sample: the emission seen directly, plus the sampler's estimate
-//! `offset + Σ weight_i · V_i contribution_i` of the VPL sum (sampler slot plan: slot 0
-//! the pixel jitter, slots 1.. the sampler's uniform numbers, in order). Draws of direct
-//! VPLs go to `direct`, the rest and the control-variate offset to `indirect`, so
-//! `color = direct + indirect` as the filters expect. `--ground-truth` replaces the
-//! sampler by the exhaustive sum ([`super::exhaustive`]).
-//!
-//! Determinism: VPLs from one sequential stream, cache records per record, pixels per
-//! row, feedback concatenated in pixel order: the same film whatever the thread count.
+//! Sampler slots: 0 the pixel jitter, 1.. the VPL sampler's numbers in order.
+//! Determinism: VPLs from one sequential stream, records per record, feedback in tile
+//! order and pixel order within a tile: the same film whatever the thread count. Every
+//! sample is unbiased for the VPL sum given the parameters it was drawn with, which depend
+//! only on earlier passes, so the progressive mean is unbiased too.
 
 use super::eval::Receiver;
-use super::exhaustive::{full_contribution, render_exhaustive, SceneVpls};
+use super::exhaustive::{exhaustive_pixel, full_contribution, SceneVpls};
 use super::{generate_vpls, VplParams, Vpls};
 use crate::cache::{
-    place_cache_points, CacheParams, GBufferView, ImportanceCache, SampleFeedback, SamplerKind,
+    place_cache_points, CacheParams, GBufferView, ImportanceCache, OptimizeStats, SampleFeedback,
+    SampleHistory, SamplerKind,
 };
 use filtrace_core::sampler::Sampler;
-use filtrace_core::{Image, Rgb, Vec2, Vec3};
-use filtrace_render::film::{Film, FilmPixel, PixelSample};
+use filtrace_core::{Image, Ray, Rgb, Vec2, Vec3};
+use filtrace_render::film::FilmPixel;
 use filtrace_render::integrator::path::visible_surface;
-use filtrace_render::integrator::SLOT_PIXEL;
-use filtrace_render::Renderer;
+use filtrace_render::integrator::tiles::trace_tile;
+use filtrace_render::integrator::{
+    CameraSample, FrameContext, Integrator, PassEnd, PathContext, PathParams, Split, Tile,
+};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::Instant;
 
 /// What the VPL integrator does.
@@ -60,83 +68,261 @@ pub struct StageTimes {
     pub optimisation_ms: f64,
 }
 
-/// One rendered frame.
-pub struct VplFrame {
-    pub film: Film,
-    /// Per pixel the d-distance from the centre's surface to the closest cache point
-    /// (thesis Figure 27); 0 for background and without a cache.
-    pub cache_distance: Image,
-    pub vpls: Vpls,
-    pub cache_records: usize,
-    pub times: StageTimes,
+/// The VPL integrator (see the module docs).
+pub struct VplIntegrator {
+    settings: VplSettings,
+    frame: VplFrameData,
+    /// The optimiser's state; only `end_pass` and the tiles' hand-over lock it.
+    learning: Mutex<Learning>,
 }
 
-/// Renders samples `0..spp` of every pixel of `renderer`'s image with the VPLs; `None`
-/// when `cancel` stopped it. Errors name the bad parameter.
-pub fn render_vpl_frame(
-    renderer: &Renderer,
+/// What `prepare` makes for one frame.
+#[derive(Default)]
+struct VplFrameData {
+    vpls: Vpls,
+    /// Records and the `optimized` parameters, which change between passes.
+    cache: RwLock<Option<ImportanceCache>>,
+    /// The G-buffer's positions and shading normals (zero normal: background).
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    width: usize,
+    times: StageTimes,
+}
+
+/// The `optimized` sampler's memory within a frame.
+#[derive(Default)]
+struct Learning {
+    /// This pass's feedback per tile, with the tile's index.
+    tiles: Vec<(usize, Vec<SampleFeedback>)>,
+    history: SampleHistory,
+    /// The last step's summary and the milliseconds spent optimising this frame.
+    last: OptimizeStats,
+    optimisation_ms: f64,
+    passes: u32,
+}
+
+/// What the integrator did in the current frame (`filtrace render --json`, benchmarks).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VplReport {
+    pub vpls: usize,
+    pub light_paths: usize,
+    pub cache_records: usize,
+    /// VPL generation and cache stages of `prepare`, optimisation of the passes so far
+    /// (shading is the passes' time, measured by whoever runs them).
+    pub times: StageTimes,
+    /// Passes the optimiser has learnt from, and its last step.
+    pub optimised_passes: u32,
+    pub last_step: OptimizeStats,
+}
+
+impl VplIntegrator {
+    /// A VPL integrator; `prepare` (done by the renderer) makes its first frame. Errors
+    /// name the bad parameter.
+    pub fn new(settings: VplSettings) -> Result<Self, String> {
+        settings.vpls.validate()?;
+        settings.cache.validate()?;
+        Ok(VplIntegrator { settings, frame: VplFrameData::default(), learning: Mutex::default() })
+    }
+
+    pub fn settings(&self) -> &VplSettings {
+        &self.settings
+    }
+
+    /// The VPLs of the current frame.
+    pub fn vpls(&self) -> &Vpls {
+        &self.frame.vpls
+    }
+
+    /// A copy of the current importance cache (`None` for `uniform` and the ground truth).
+    pub fn cache(&self) -> Option<ImportanceCache> {
+        self.frame.cache.read().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    pub fn report(&self) -> VplReport {
+        let learning = self.learning.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut times = self.frame.times;
+        times.optimisation_ms = learning.optimisation_ms;
+        let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
+        VplReport {
+            vpls: self.frame.vpls.len(),
+            light_paths: self.frame.vpls.light_paths,
+            cache_records: cache.as_ref().map_or(0, |c| c.records().len()),
+            times,
+            optimised_passes: learning.passes,
+            last_step: learning.last,
+        }
+    }
+
+    /// Per pixel the d-distance from the surface through its centre to the closest cache
+    /// record (the thesis's Figure 27); 0 for background and without a cache.
+    pub fn cache_distance(&self) -> Image {
+        let f = &self.frame;
+        let height = f.positions.len().checked_div(f.width).unwrap_or(0);
+        let cache = f.cache.read().unwrap_or_else(PoisonError::into_inner);
+        let dist: Vec<f32> = (0..f.positions.len())
+            .into_par_iter()
+            .map(|i| match cache.as_ref() {
+                Some(c) if f.normals[i] != Vec3::ZERO => {
+                    c.neighbours(f.positions[i], f.normals[i]).closest_distance().unwrap_or(0.0)
+                }
+                _ => 0.0,
+            })
+            .collect();
+        Image::from_vec(f.width, height, 1, dist).expect("one value per pixel")
+    }
+
+    fn learns(&self) -> bool {
+        self.settings.sampler == SamplerKind::Optimized && !self.settings.ground_truth
+    }
+
+    /// One camera sample with the cache's sampler; its draws' feedback goes to `feedback`.
+    fn shade(
+        &self,
+        cache: Option<&ImportanceCache>,
+        ctx: &PathContext,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want: bool,
+        mut feedback: Option<&mut Vec<SampleFeedback>>,
+    ) -> CameraSample {
+        let vpls = &self.frame.vpls;
+        let (Some(cache), false) = (cache, self.settings.ground_truth) else {
+            let (radiance, surface) = exhaustive_pixel(ctx, vpls, ray);
+            return CameraSample { radiance, surface: want.then_some(surface) };
+        };
+        let Some(si) = ctx.intersect(ray) else {
+            let direct = ctx.lights.environment_radiance(ray.dir);
+            return CameraSample {
+                radiance: Split { direct, indirect: Rgb::ZERO },
+                surface: want.then(Default::default),
+            };
+        };
+        let rx = Receiver::new(si, ctx.bsdf(&si));
+        let nb = cache.neighbours(si.p, si.n_s);
+        sampler.set_slot(1);
+        let plan = cache.sample(self.settings.sampler, &nb, &mut || sampler.next_1d());
+        let mut l = Split { direct: ctx.emitted(&si), indirect: plan.offset };
+        for (i, d) in plan.draws().iter().enumerate() {
+            let v = &vpls.vpls[d.vpl as usize];
+            let c = if d.weight > 0.0 || feedback.is_some() {
+                full_contribution(ctx, v, &rx, vpls)
+            } else {
+                Rgb::ZERO
+            };
+            if v.is_direct() {
+                l.direct += d.weight * c;
+            } else {
+                l.indirect += d.weight * c;
+            }
+            if let Some(fb) = feedback.as_deref_mut() {
+                fb.extend(plan.feedback(i, c));
+            }
+        }
+        CameraSample { radiance: l, surface: want.then(|| visible_surface(ctx, &si)) }
+    }
+}
+
+impl Integrator for VplIntegrator {
+    fn prepare(&mut self, frame: &FrameContext) {
+        let previous = self.frame.cache.get_mut().unwrap_or_else(PoisonError::into_inner).take();
+        self.frame = prepare_frame(&self.settings, frame, previous.as_ref());
+        let records = self
+            .frame
+            .cache
+            .get_mut()
+            .unwrap_or_else(PoisonError::into_inner)
+            .as_ref()
+            .map_or(0, |c| c.records().len());
+        let capacity = self.settings.cache.optimizer.history;
+        *self.learning.get_mut().unwrap_or_else(PoisonError::into_inner) =
+            Learning { history: SampleHistory::new(records, capacity), ..Learning::default() };
+    }
+
+    fn li(
+        &self,
+        ctx: &PathContext,
+        _: &PathParams,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        want: bool,
+    ) -> CameraSample {
+        let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
+        self.shade(cache.as_ref(), ctx, ray, sampler, want, None)
+    }
+
+    /// The default tile loop with the cache locked once per tile and, for `optimized`, the
+    /// tile's feedback handed over at its end.
+    fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
+        let learn = self.learns();
+        let mut feedback = Vec::new();
+        let done = {
+            let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
+            trace_tile(tile, pixels, |ray, sampler, want| {
+                self.shade(cache.as_ref(), &tile.ctx, ray, sampler, want, learn.then_some(&mut feedback))
+            })
+        };
+        // The cache's lock is released first: `end_pass` takes the two the other way round.
+        if learn && done {
+            self.learning.lock().unwrap_or_else(PoisonError::into_inner).tiles.push((tile.index, feedback));
+        }
+        done
+    }
+
+    /// `optimized`: the finished pass's feedback (tile order) joins the history and every
+    /// record takes one step; a pass cut short teaches nothing.
+    fn end_pass(&self, pass: &PassEnd) {
+        if !self.learns() {
+            return;
+        }
+        let mut learning = self.learning.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut tiles = std::mem::take(&mut learning.tiles);
+        if !pass.finished {
+            return;
+        }
+        let t = Instant::now();
+        tiles.sort_unstable_by_key(|&(index, _)| index);
+        let feedback: Vec<SampleFeedback> = tiles.into_iter().flat_map(|(_, fb)| fb).collect();
+        learning.history.add(&feedback);
+        let mut cache = self.frame.cache.write().unwrap_or_else(PoisonError::into_inner);
+        if let Some(cache) = cache.as_mut() {
+            learning.last = cache.optimize_history(&learning.history);
+            learning.passes += 1;
+        }
+        learning.optimisation_ms += t.elapsed().as_secs_f64() * 1e3;
+    }
+}
+
+/// The VPLs, G-buffer and cache of one frame.
+fn prepare_frame(
     settings: &VplSettings,
-    spp: u32,
-    cancel: &AtomicBool,
-) -> Result<Option<VplFrame>, String> {
-    settings.vpls.validate()?;
-    settings.cache.validate()?;
-    let ctx = renderer.context();
+    frame: &FrameContext,
+    previous: Option<&ImportanceCache>,
+) -> VplFrameData {
     let mut times = StageTimes::default();
     let t = Instant::now();
-    let vpls = generate_vpls(&ctx, &renderer.path_params(), &settings.vpls);
+    let vpls = generate_vpls(
+        &frame.ctx,
+        &frame.params,
+        &VplParams { seed: frame_vpl_seed(settings.vpls.seed, frame.seed, frame.frame), ..settings.vpls },
+    );
     times.vpl_generation_ms = ms(t);
-    let (w, h) = (renderer.settings().width as usize, renderer.settings().height as usize);
-    if settings.ground_truth {
-        let t = Instant::now();
-        let seed = renderer.settings().seed;
-        let film = render_exhaustive(&ctx, renderer.camera(), &vpls, 0, spp, seed, cancel);
-        times.shading_ms = ms(t);
-        let cache_distance = Image::new(w, h, 1);
-        return Ok(film.map(|film| VplFrame { film, cache_distance, vpls, cache_records: 0, times }));
-    }
-
-    // G-buffer and importance cache.
     let t = Instant::now();
-    let receivers = gbuffer(renderer);
-    let mut cache = build_cache(renderer, settings, &vpls, &receivers)?;
+    let (width, height) = (frame.camera.width() as usize, frame.camera.height() as usize);
+    let receivers = gbuffer(frame);
+    let positions: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.p)).collect();
+    let normals: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.n_s)).collect();
+    let cache = (!settings.ground_truth).then(|| {
+        let view = GBufferView { width, height, positions: &positions, normals: &normals };
+        build_cache(settings, frame, &vpls, &view, &receivers, previous)
+    });
     times.cache_ms = ms(t);
+    VplFrameData { vpls, cache: RwLock::new(cache), positions, normals, width, times }
+}
 
-    // Shading, rows in parallel; feedback kept in pixel order.
-    let t = Instant::now();
-    let mut film = Film::new(w, h);
-    let mut dist = vec![0.0f32; w * h];
-    let learn = settings.sampler == SamplerKind::Optimized;
-    let feedback: Vec<Vec<SampleFeedback>> = film
-        .pixels_mut()
-        .par_chunks_mut(w)
-        .zip(dist.par_chunks_mut(w))
-        .enumerate()
-        .map(|(y, (row, drow))| {
-            let mut fb = Vec::new();
-            for (x, (px, d)) in row.iter_mut().zip(drow.iter_mut()).enumerate() {
-                let job = PixelJob { renderer, settings, vpls: &vpls, cache: &cache, x, y, spp, learn };
-                if !shade_pixel(&job, px, d, &mut fb, cancel) {
-                    break;
-                }
-            }
-            fb
-        })
-        .collect();
-    times.shading_ms = ms(t);
-    if cancel.load(Ordering::Relaxed) {
-        return Ok(None);
-    }
-
-    // One Newton step per record (optimized).
-    let t = Instant::now();
-    if learn {
-        let all: Vec<SampleFeedback> = feedback.into_iter().flatten().collect();
-        cache.optimize(&all);
-    }
-    times.optimisation_ms = ms(t);
-    let cache_distance = Image::from_vec(w, h, 1, dist).expect("w × h values");
-    Ok(Some(VplFrame { film, cache_distance, vpls, cache_records: cache.records().len(), times }))
+/// The seed of a frame's VPLs: the VPL seed plus the render's seed, decorrelated per frame
+/// (public so that a ground truth built outside the renderer draws the same VPLs).
+pub fn frame_vpl_seed(base: u64, render_seed: u64, frame: i64) -> u64 {
+    base.wrapping_add(render_seed) ^ (frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
 }
 
 fn ms(t: Instant) -> f64 {
@@ -144,103 +330,38 @@ fn ms(t: Instant) -> f64 {
 }
 
 /// The surface through each pixel centre, with its BSDF (row-major).
-fn gbuffer(renderer: &Renderer) -> Vec<Option<Receiver>> {
-    let ctx = renderer.context();
-    let w = renderer.settings().width as usize;
-    let n = w * renderer.settings().height as usize;
+fn gbuffer(frame: &FrameContext) -> Vec<Option<Receiver>> {
+    let (ctx, camera) = (frame.ctx, frame.camera);
+    let w = camera.width() as usize;
+    let n = w * camera.height() as usize;
     (0..n)
         .into_par_iter()
         .map(|i| {
-            let ray = renderer.camera().generate_ray((i % w) as u32, (i / w) as u32, Vec2::splat(0.5));
+            let ray = camera.generate_ray((i % w) as u32, (i / w) as u32, Vec2::splat(0.5));
             ctx.intersect(&ray).map(|si| Receiver::new(si, ctx.bsdf(&si)))
         })
         .collect()
 }
 
-/// Places the cache points through the G-buffer and evaluates every VPL at each.
+/// Places the cache points through the G-buffer and evaluates every VPL at each; an
+/// empty cache (every sampler then draws uniformly) for `uniform` and for a scene whose
+/// bounds are degenerate.
 fn build_cache(
-    renderer: &Renderer,
     settings: &VplSettings,
+    frame: &FrameContext,
     vpls: &Vpls,
+    view: &GBufferView,
     receivers: &[Option<Receiver>],
-) -> Result<ImportanceCache, String> {
+    previous: Option<&ImportanceCache>,
+) -> ImportanceCache {
+    let empty = || ImportanceCache::empty(vpls.len(), &settings.cache);
     if !settings.sampler.needs_cache() {
-        return Ok(ImportanceCache::empty(vpls.len(), &settings.cache));
+        return empty();
     }
-    let positions: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.p)).collect();
-    let normals: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.n_s)).collect();
-    let s = renderer.settings();
-    let view = GBufferView {
-        width: s.width as usize,
-        height: s.height as usize,
-        positions: &positions,
-        normals: &normals,
+    let Ok(points) = place_cache_points(view, settings.cache.cache_points, frame.seed) else {
+        return empty();
     };
-    let points = place_cache_points(&view, settings.cache.cache_points, s.seed)?;
-    let set = SceneVpls { ctx: renderer.context(), vpls, receivers };
-    let diagonal = renderer.scene().bounds().extent().length();
-    ImportanceCache::build(&set, points, diagonal, &settings.cache, None)
-}
-
-/// One pixel's work.
-struct PixelJob<'a> {
-    renderer: &'a Renderer,
-    settings: &'a VplSettings,
-    vpls: &'a Vpls,
-    cache: &'a ImportanceCache,
-    x: usize,
-    y: usize,
-    spp: u32,
-    learn: bool,
-}
-
-/// Adds samples `0..spp` of one pixel; false when cancelled.
-fn shade_pixel(
-    job: &PixelJob,
-    px: &mut FilmPixel,
-    dist: &mut f32,
-    feedback: &mut Vec<SampleFeedback>,
-    cancel: &AtomicBool,
-) -> bool {
-    let ctx = job.renderer.context();
-    let (x, y) = (job.x as u32, job.y as u32);
-    for index in 0..job.spp {
-        if cancel.load(Ordering::Relaxed) {
-            return false;
-        }
-        let mut sampler = Sampler::new(x, y, index, job.renderer.settings().seed);
-        sampler.set_slot(SLOT_PIXEL);
-        let ray = job.renderer.camera().sample_ray(x, y, index, sampler.next_2d());
-        let Some(si) = ctx.intersect(&ray) else {
-            let env = ctx.lights.environment_radiance(ray.dir);
-            px.add(&PixelSample { color: env, direct: env, indirect: Rgb::ZERO });
-            continue;
-        };
-        let rx = Receiver::new(si, ctx.bsdf(&si));
-        let nb = job.cache.neighbours(si.p, si.n_s);
-        if index == 0 {
-            px.surface = visible_surface(&ctx, &si);
-            *dist = nb.closest_distance().unwrap_or(0.0);
-        }
-        let plan = job.cache.sample(job.settings.sampler, &nb, &mut || sampler.next_1d());
-        let (mut direct, mut indirect) = (ctx.emitted(&si), plan.offset);
-        for (i, d) in plan.draws().iter().enumerate() {
-            let v = &job.vpls.vpls[d.vpl as usize];
-            let c = if d.weight > 0.0 || job.learn {
-                full_contribution(&ctx, v, &rx, job.vpls)
-            } else {
-                Rgb::ZERO
-            };
-            if v.is_direct() {
-                direct += d.weight * c;
-            } else {
-                indirect += d.weight * c;
-            }
-            if job.learn {
-                feedback.extend(plan.feedback(i, c));
-            }
-        }
-        px.add(&PixelSample { color: direct + indirect, direct, indirect });
-    }
-    true
+    let set = SceneVpls { ctx: frame.ctx, vpls, receivers };
+    let diagonal = frame.ctx.scene.bounds().extent().length();
+    ImportanceCache::build(&set, points, diagonal, &settings.cache, previous).unwrap_or_else(|_| empty())
 }

@@ -185,12 +185,13 @@ fn vpl_image_is_close_to_the_path_traced_image() {
 }
 
 /// Every sampler's frame estimates the exhaustive VPL sum: on a 12² Cornell box with 256
-/// VPLs the image means at 64 spp agree within 6 standard errors (from the per-pixel
-/// variances), and the optimised frame is the same with one and two threads.
+/// VPLs the image means at 64 spp (progressive passes 1, 1, 2, ..., 32; `optimized`
+/// learning after each) agree within 6 standard errors (from the per-pixel variances), and
+/// the optimised frame is the same with one and two threads.
 #[test]
 fn every_sampler_frame_matches_the_exhaustive_mean_and_is_thread_independent() {
     use crate::cache::{CacheParams, SamplerKind};
-    let r = cornell(12, 8);
+    let mut r = cornell(12, 8);
     let cancel = AtomicBool::new(false);
     let vpls = VplParams { count: 256, direct: 32, ..VplParams::thesis() };
     let cache = CacheParams { cache_points: 32, ..CacheParams::default() };
@@ -204,64 +205,85 @@ fn every_sampler_frame_matches_the_exhaustive_mean_and_is_thread_independent() {
     let truth = VplSettings { vpls, sampler: SamplerKind::Uniform, cache: cache.clone(), ground_truth: true };
     // The same 64 camera rays per pixel as the samplers (same seed): only the VPL
     // sampling differs.
-    let gt = render_vpl_frame(&r, &truth, 64, &cancel).unwrap().unwrap();
+    let gt = render_vpl_frame(&mut r, &truth, 64, &cancel).unwrap().unwrap();
     let (m_gt, _) = mean_se(&gt.film);
     for sampler in SamplerKind::ALL {
         let s = VplSettings { vpls, sampler, cache: cache.clone(), ground_truth: false };
-        let f = render_vpl_frame(&r, &s, 64, &cancel).unwrap().unwrap();
+        let f = render_vpl_frame(&mut r, &s, 64, &cancel).unwrap().unwrap();
         let (m, se) = mean_se(&f.film);
         assert!((m - m_gt).abs() < 6.0 * se + 1e-4, "{}: {m} vs exhaustive {m_gt} (se {se})", sampler.name());
         assert_eq!(f.film.dropped_samples(), 0);
+        assert_eq!(f.vpls.vpls, gt.vpls.vpls, "the same VPLs for every sampler");
         if sampler.needs_cache() {
             assert!(f.cache_records > 0 && f.cache_distance.data().iter().any(|&d| d > 0.0));
+        }
+        if sampler == SamplerKind::Optimized {
+            let report = r.integrator_as::<VplIntegrator>().unwrap().report();
+            assert_eq!(report.optimised_passes, 7, "one step after each of the 7 passes");
         }
     }
     let s = VplSettings { vpls, sampler: SamplerKind::Optimized, cache, ground_truth: false };
     let run = |threads| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| render_vpl_frame(&r, &s, 2, &cancel)).unwrap().unwrap()
+        let mut r = cornell(12, 8);
+        pool.install(|| render_vpl_frame(&mut r, &s, 8, &cancel)).unwrap().unwrap()
     };
     let (one, two) = (run(1), run(2));
     assert!(one.film.pixels() == two.film.pixels(), "optimized frame differs between 1 and 2 threads");
 }
 
-/// Through the renderer's `Integrator` seam: `prepare` makes the VPLs, the exhaustive
-/// `li` equals `exhaustive_pixel`, and Keller's uniform estimator averages to it (the
-/// image mean within 6 se at 256 samples per pixel on the pixel centres).
+/// Through the renderer: the integrator is prepared when set and at every frame update
+/// (new VPLs per frame, parameters carried); its `li` is the exhaustive sum for the
+/// ground truth; a renderer without it is refused by `render_vpl_passes`.
 #[test]
-fn vpl_integrator_through_the_seam() {
-    use filtrace_render::integrator::{FrameContext, Integrator};
-    let r = cornell(8, 8);
+fn vpl_integrator_in_the_renderer() {
+    use crate::cache::SamplerKind;
+    let mut r = cornell(8, 8);
+    let cancel = AtomicBool::new(false);
+    assert!(render_vpl_passes(&r, 1, 1, &cancel).is_err(), "the path tracer is not the VPL integrator");
+    let vpls = VplParams { count: 128, direct: 16, ..VplParams::thesis() };
+    let truth = VplSettings { vpls, ground_truth: true, ..VplSettings::default() };
+    use_vpl_integrator(&mut r, &truth).unwrap();
     let ctx = r.context();
-    let frame = FrameContext { ctx, params: r.path_params(), frame: 0, seed: 4 };
-    let params = VplParams { count: 128, direct: 16, ..VplParams::thesis() };
-    let mut exact = VplIntegrator::new(params, VplEstimator::Exhaustive);
-    exact.prepare(&frame);
-    let mut uniform = VplIntegrator::new(params, VplEstimator::Uniform);
-    uniform.prepare(&frame);
-    assert!(exact.vpls.len() >= 128 && exact.vpls.vpls == uniform.vpls.vpls);
-    let (mut sum_exact, mut sum, mut var) = (0.0f64, 0.0f64, 0.0f64);
-    for y in 0..8 {
-        for x in 0..8 {
-            let ray = r.camera().generate_ray(x, y, filtrace_core::Vec2::splat(0.5));
-            let want = exhaustive_pixel(&ctx, &exact.vpls, &ray).0;
-            let got = exact.li(&ctx, &frame.params, &ray, &mut Sampler::new(x, y, 0, 0), true);
-            assert_eq!(got.radiance, want);
-            sum_exact += luminance(want.color()) as f64;
-            let s: Vec<f64> = (0..256)
-                .map(|i| {
-                    let c = uniform.li(&ctx, &frame.params, &ray, &mut Sampler::new(x, y, i, 0), false);
-                    luminance(c.radiance.color()) as f64
-                })
-                .collect();
-            let (m, v) = mean_var(&s);
-            sum += m;
-            var += v / 256.0;
-        }
+    let integrator = r.integrator_as::<VplIntegrator>().unwrap();
+    assert!(integrator.vpls().len() >= 128);
+    for (x, y) in [(0, 0), (3, 5), (7, 7)] {
+        let ray = r.camera().generate_ray(x, y, filtrace_core::Vec2::splat(0.5));
+        let want = exhaustive_pixel(&ctx, integrator.vpls(), &ray).0;
+        assert_eq!(r.trace_sample(x, y, 0).radiance, want);
     }
-    assert!(
-        (sum - sum_exact).abs() < 6.0 * var.sqrt() + 1e-6,
-        "uniform {sum} vs exhaustive {sum_exact} (se {})",
-        var.sqrt()
-    );
+    let first = integrator.vpls().vpls.clone();
+    let s = VplSettings { vpls, sampler: SamplerKind::Optimized, ..VplSettings::default() };
+    use_vpl_integrator(&mut r, &s).unwrap();
+    assert_eq!(r.integrator_as::<VplIntegrator>().unwrap().vpls().vpls, first, "same frame, same VPLs");
+    render_vpl_passes(&r, 4, u32::MAX, &cancel).unwrap().unwrap();
+    let learnt = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap().params().to_vec();
+    r.prepare_frame(3).unwrap();
+    let next = r.integrator_as::<VplIntegrator>().unwrap();
+    assert_ne!(next.vpls().vpls, first, "frame 3 has its own VPLs");
+    assert_eq!(next.report().optimised_passes, 0);
+    // The camera did not move: the same cache points, each keeping its parameters.
+    assert_eq!(next.cache().unwrap().params(), &learnt[..]);
+}
+
+/// Ctrl-C during the passes keeps an exact prefix of every pixel's samples, as the path
+/// tracer does: cancelled after the first pass, the film equals a one-sample render.
+#[test]
+fn a_cancelled_vpl_render_keeps_whole_passes() {
+    use crate::cache::SamplerKind;
+    let mut r = cornell(8, 8);
+    let s = VplSettings {
+        vpls: VplParams { count: 64, direct: 8, ..VplParams::thesis() },
+        sampler: SamplerKind::BalanceCv,
+        ..VplSettings::default()
+    };
+    use_vpl_integrator(&mut r, &s).unwrap();
+    let cancel = AtomicBool::new(false);
+    let one = render_vpl_passes(&r, 1, 1, &cancel).unwrap().unwrap();
+    let mut film = r.new_film();
+    assert!(r.render_pass(&mut film, 0, 1, &cancel));
+    cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    assert!(!r.render_pass(&mut film, 1, 1, &cancel));
+    assert!(film.pixels() == one.film.pixels() && !one.cancelled);
+    assert!(render_vpl_passes(&r, 4, 1, &cancel).unwrap().is_none(), "cancelled before any sample");
 }

@@ -1,0 +1,121 @@
+//! The samples each record has seen during a frame, kept across the frame's passes for the
+//! `optimized` sampler (He and Owen 2014: the optimiser's pilot sample grows with every
+//! pass). G(α', β) can be estimated at any parameters from samples drawn with any
+//! mixture q0 > 0 (each carries its own `1/q0`), so the samples of earlier passes stay
+//! valid after the parameters moved: the per-record objective, gradient and Hessian are
+//! recomputed at the current parameters over all of them, not averaged from stale ones.
+//!
+//! Memory is bounded by `capacity` samples per record: beyond it a reservoir keeps a
+//! uniform random subset of every sample that arrived (Vitter's algorithm R), with random
+//! numbers hashed from (record, arrival number), so the kept set depends only on the order
+//! of the feedback, never on the thread count.
+
+use super::optimize::SampleFeedback;
+use super::TECHNIQUES;
+use filtrace_core::rng::splitmix64;
+use rayon::prelude::*;
+
+/// One sample as its record keeps it: what G needs, with the record's interpolation weight.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StoredSample {
+    /// `P_k(j)`.
+    pub pmf: [f32; TECHNIQUES],
+    /// `Q_k(j)`.
+    pub cv: [f32; TECHNIQUES],
+    /// `1 / q0(j)`.
+    pub inv_pdf: f32,
+    /// Luminance of f(j).
+    pub value: f32,
+    /// The record's interpolation weight `w_i` at the sample's shading point.
+    pub weight: f32,
+}
+
+/// Per record, the samples kept so far this frame.
+#[derive(Clone, Debug, Default)]
+pub struct SampleHistory {
+    records: Vec<RecordSamples>,
+    capacity: usize,
+}
+
+#[derive(Clone, Debug, Default)]
+struct RecordSamples {
+    kept: Vec<StoredSample>,
+    /// Samples that arrived (kept or not).
+    seen: u64,
+}
+
+impl SampleHistory {
+    /// An empty history of `records` records keeping at most `capacity` samples each.
+    pub fn new(records: usize, capacity: usize) -> Self {
+        SampleHistory { records: vec![RecordSamples::default(); records], capacity: capacity.max(1) }
+    }
+
+    /// Number of records.
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    /// The samples record `l` keeps.
+    pub fn samples(&self, l: usize) -> &[StoredSample] {
+        self.records.get(l).map_or(&[], |r| &r.kept)
+    }
+
+    /// Samples that arrived at record `l` (kept or not).
+    pub fn seen(&self, l: usize) -> u64 {
+        self.records.get(l).map_or(0, |r| r.seen)
+    }
+
+    /// Adds a pass's feedback, which must come in a fixed order (pixel order): each record
+    /// sees its samples in that order. Records out of range and zero weights are skipped.
+    pub fn add(&mut self, feedback: &[SampleFeedback]) {
+        let n = self.records.len();
+        // Per-record lists of (feedback index, weight), in feedback order (CSR).
+        let mut start = vec![0usize; n + 1];
+        fn entries(fb: &SampleFeedback, n: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
+            fb.records().filter(move |&(l, w)| l < n && w > 0.0)
+        }
+        for fb in feedback {
+            entries(fb, n).for_each(|(l, _)| start[l + 1] += 1);
+        }
+        for l in 0..n {
+            start[l + 1] += start[l];
+        }
+        let mut fill = start.clone();
+        let mut list = vec![(0u32, 0.0f32); start[n]];
+        for (i, fb) in feedback.iter().enumerate() {
+            for (l, w) in entries(fb, n) {
+                list[fill[l]] = (i as u32, w);
+                fill[l] += 1;
+            }
+        }
+        let capacity = self.capacity;
+        self.records.par_iter_mut().enumerate().for_each(|(l, record)| {
+            for &(i, weight) in &list[start[l]..start[l + 1]] {
+                let fb = &feedback[i as usize];
+                let s = StoredSample { pmf: fb.pmf, cv: fb.cv, inv_pdf: fb.inv_pdf, value: fb.value, weight };
+                record.push(s, l, capacity);
+            }
+        });
+    }
+}
+
+impl RecordSamples {
+    /// Algorithm R: the first `capacity` samples are kept; arrival `n` then replaces a
+    /// uniformly chosen slot with probability `capacity / (n + 1)`.
+    fn push(&mut self, s: StoredSample, record: usize, capacity: usize) {
+        let n = self.seen;
+        self.seen += 1;
+        if self.kept.len() < capacity {
+            self.kept.push(s);
+            return;
+        }
+        let slot = splitmix64(((record as u64) << 40) ^ n) % (n + 1);
+        if (slot as usize) < capacity {
+            self.kept[slot as usize] = s;
+        }
+    }
+}

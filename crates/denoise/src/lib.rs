@@ -35,6 +35,7 @@
 pub mod atrous;
 pub mod bench_input;
 pub mod bilateral;
+mod chains;
 pub mod demodulate;
 pub mod error;
 pub mod gbuffer;

@@ -13,20 +13,31 @@ static POOL: Mutex<Vec<Vec<f32>>> = Mutex::new(Vec::new());
 const MAX_BUFFERS: usize = 32;
 
 /// A buffer of exactly `len` values (contents unspecified).
+///
+/// Only a pooled buffer of about the right size is reused: handing a large plane to a small
+/// request (a band's column sums, a ring of weight rows) left the next large request to a
+/// fresh allocation. A fresh buffer is `calloc`ed: its pages are zeroed when the parallel
+/// pass that fills it first touches them, not by one thread up front (a serial 133 MB
+/// memset for the guided filter's coefficients at 1080p).
 pub(crate) fn take(len: usize) -> Vec<f32> {
-    let mut v = {
+    let pooled = {
         let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
-        // Prefer the smallest buffer that is large enough, else the largest one.
-        let best = (0..pool.len())
-            .filter(|&i| pool[i].capacity() >= len)
-            .min_by_key(|&i| pool[i].capacity())
-            .or_else(|| (0..pool.len()).max_by_key(|&i| pool[i].capacity()));
-        best.map(|i| pool.swap_remove(i)).unwrap_or_default()
+        let fits = |v: &Vec<f32>| v.capacity() >= len && v.capacity() - len <= len.max(SMALL);
+        let best = (0..pool.len()).filter(|&i| fits(&pool[i])).min_by_key(|&i| pool[i].capacity());
+        best.map(|i| pool.swap_remove(i))
     };
-    v.resize(len, 0.0);
-    v.truncate(len);
-    v
+    match pooled {
+        Some(mut v) => {
+            v.resize(len, 0.0);
+            v.truncate(len);
+            v
+        }
+        None => vec![0.0; len],
+    }
 }
+
+/// Slack below which any large-enough buffer fits a request (values: 1 MB).
+const SMALL: usize = 1 << 18;
 
 /// Returns a buffer to the pool.
 pub(crate) fn give(v: Vec<f32>) {

@@ -9,8 +9,8 @@
 //! `W_o(p) = h(o) w(p, p+o)`; pixel `p` uses `W_o(p)` for its tap `+o` and `W_o(p-o)` for
 //! its tap `-o`.
 //!
-//! Taps connect only rows `step` apart, so each band of rows is walked chain by chain (the
-//! rows `y`, `y + step`, `y + 2 step`, ...): pass 1 writes the 12 weight rows of row `y` into a
+//! Taps connect only rows `step` apart, so the rows are walked chain by chain (the rows `y`,
+//! `y + step`, `y + 2 step`, ...; segments of the chains run in parallel, [`crate::chains`]): pass 1 writes the 12 weight rows of row `y` into a
 //! ring buffer holding the chain's last 3 rows, pass 2 gathers row `y` (eq. 2 with its
 //! normalisation, eq. 3) from the weight rows `y`, `y - step` and `y - 2 step`. Each weight costs the three
 //! distances and one `exp`; the gather costs one weight load and four multiply-adds per tap.
@@ -21,9 +21,10 @@
 //! filter: out-of-image taps are skipped (the sum renormalises), background and surface never
 //! mix, an invalid neighbour colour (`valid = 0`) gets weight 0, a pixel whose weights sum to
 //! less than `1e-30` keeps its value. The summation order differs from the direct pass (not
-//! bit-identical, within float rounding). Every pixel's result is independent of the band
-//! split, so results do not depend on the thread count.
+//! bit-identical, within float rounding). Every pixel's result is independent of the
+//! segment split, so results do not depend on the thread count.
 
+use crate::chains::{rows_of, segments, PlanesSink, RgbSink, Sink};
 use crate::kernel::{ld, ld3, RangeTerms};
 use crate::simd::{isa, madd, scaled_exp_neg, Isa};
 use rayon::prelude::*;
@@ -429,75 +430,17 @@ pub(crate) enum BandOut<'a> {
     /// Three planes of `stride` values per row (the input of the next level).
     Planes([&'a mut [f32]; 3]),
     /// Interleaved RGB rows of `width` pixels: the last level writes the output image
-    /// directly (each row gathered into three row buffers, then interleaved while they are
-    /// in L1), instead of writing planes and interleaving them in a separate pass.
+    /// directly instead of writing planes and interleaving them in a separate pass.
     Rgb(&'a mut [f32]),
 }
 
-/// The rows of one band that the gather writes: a separate [`band`] instance per kind, so
-/// that the planes' loop compiles as before (one `match` inside `band` made every level
-/// ~8% slower).
-trait Sink {
-    /// Number of rows of the band.
-    fn rows(&self) -> usize;
-    /// The three output rows of band row `r` (at least `width` values each).
-    fn row(&mut self, r: usize) -> [&mut [f32]; 3];
-    /// Called once band row `r` is written.
-    fn done(&mut self, r: usize);
-}
-
-struct PlanesSink<'a> {
-    o: [&'a mut [f32]; 3],
-    stride: usize,
-}
-
-impl Sink for PlanesSink<'_> {
-    #[inline(always)]
-    fn rows(&self) -> usize {
-        self.o[0].len() / self.stride
-    }
-    #[inline(always)]
-    fn row(&mut self, r: usize) -> [&mut [f32]; 3] {
-        let range = r * self.stride..(r + 1) * self.stride;
-        let [o0, o1, o2] = &mut self.o;
-        [&mut o0[range.clone()], &mut o1[range.clone()], &mut o2[range]]
-    }
-    #[inline(always)]
-    fn done(&mut self, _: usize) {}
-}
-
-struct RgbSink<'a> {
-    o: &'a mut [f32],
-    width: usize,
-    tmp: [Vec<f32>; 3],
-}
-
-impl Sink for RgbSink<'_> {
-    #[inline(always)]
-    fn rows(&self) -> usize {
-        self.o.len() / (3 * self.width)
-    }
-    #[inline(always)]
-    fn row(&mut self, _: usize) -> [&mut [f32]; 3] {
-        let [t0, t1, t2] = &mut self.tmp;
-        [&mut t0[..], &mut t1[..], &mut t2[..]]
-    }
-    #[inline(always)]
-    fn done(&mut self, r: usize) {
-        let w = self.width;
-        let [t0, t1, t2] = &self.tmp;
-        for (i, px) in self.o[r * 3 * w..(r + 1) * 3 * w].chunks_exact_mut(3).enumerate() {
-            px[0] = t0[i];
-            px[1] = t1[i];
-            px[2] = t2[i];
-        }
-    }
-}
-
-/// One band of output rows `y0..y0 + rows`: weight rows from `y0 - 2 step` on (the ring's
-/// start-up), gathers from `y0` on.
+/// One segment of a chain ([`crate::chains`]): output rows `first, first + step, ...`, weight
+/// rows from two chain rows before `first` on (the ring's start-up). Walking a chain on its
+/// own keeps the ring at 3 rows with the chain's next rows still in the cache (walking all
+/// rows in order needs `2 step + 1` ring rows, which fell out of L2 at the coarse levels:
+/// 1.4x slower at step 16).
 #[inline(always)]
-fn band<
+fn segment<
     const WC: bool,
     const WN: bool,
     const WX: bool,
@@ -508,54 +451,47 @@ fn band<
 >(
     a: &LevelInput,
     lv: &Level,
-    y0: usize,
+    first: usize,
     out: &mut O,
     ring: &mut [f32],
 ) {
     let s = lv.step;
-    let rows = out.rows();
-    // Taps connect only rows `step` apart: the rows of each residue class `y mod step` form
-    // a chain, walked on its own so that the ring holds 3 rows and the chain's next rows
-    // are still in the cache (walking all rows in order needs `2 step + 1` ring rows, which
-    // fell out of L2 at the coarse levels: 1.4x slower at step 16).
-    for y_first in y0..(y0 + s).min(y0 + rows) {
-        // Start-up: weight rows of the chain before the band (up to two).
-        let start = if y_first >= 2 * s { y_first - 2 * s } else { y_first % s };
-        for y in (start..y0 + rows).step_by(s) {
-            weight_row::<WC, WN, WX, B, F>(a, lv, y, ring);
-            if y >= y0 {
-                // (The gather writes the first `a.width` values of each output row.)
-                gather_row::<V, B, F>(a, lv, y, ring, out.row(y - y0));
-                out.done(y - y0);
-            }
+    let start = if first >= 2 * s { first - 2 * s } else { first % s };
+    for y in (start..first + out.rows() * s).step_by(s) {
+        weight_row::<WC, WN, WX, B, F>(a, lv, y, ring);
+        if y >= first {
+            let r = (y - first) / s;
+            // (The gather writes the first `a.width` values of each output row.)
+            gather_row::<V, B, F>(a, lv, y, ring, out.row(r));
+            out.done(r);
         }
     }
 }
 
-/// The instantiations of [`band`] for each instruction set.
-macro_rules! band_isa {
+/// The instantiations of [`segment`] for each instruction set.
+macro_rules! segment_isa {
     ($name:ident, $feat:literal, $b:literal) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $feat)]
         unsafe fn $name<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink>(
             a: &LevelInput,
             lv: &Level,
-            y0: usize,
+            first: usize,
             out: &mut O,
             ring: &mut [f32],
         ) {
-            band::<WC, WN, WX, V, $b, true, O>(a, lv, y0, out, ring)
+            segment::<WC, WN, WX, V, $b, true, O>(a, lv, first, out, ring)
         }
     };
 }
-band_isa!(band_avx512, "avx512f,avx2,fma", 16);
-band_isa!(band_avx2, "avx2,fma", 8);
+segment_isa!(segment_avx512, "avx512f,avx2,fma", 16);
+segment_isa!(segment_avx2, "avx2,fma", 8);
 
 #[inline(always)]
-fn band_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink>(
+fn segment_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink>(
     a: &LevelInput,
     lv: &Level,
-    y0: usize,
+    first: usize,
     out: &mut O,
     ring: &mut [f32],
     isa: Isa,
@@ -563,53 +499,45 @@ fn band_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, O: Sink
     #[cfg(target_arch = "x86_64")]
     match isa {
         // SAFETY: `isa()` reports Avx512 / Avx2 only when those features were detected.
-        Isa::Avx512 => return unsafe { band_avx512::<WC, WN, WX, V, O>(a, lv, y0, out, ring) },
-        Isa::Avx2 => return unsafe { band_avx2::<WC, WN, WX, V, O>(a, lv, y0, out, ring) },
+        Isa::Avx512 => return unsafe { segment_avx512::<WC, WN, WX, V, O>(a, lv, first, out, ring) },
+        Isa::Avx2 => return unsafe { segment_avx2::<WC, WN, WX, V, O>(a, lv, first, out, ring) },
         Isa::Base => {}
     }
     let _ = isa;
-    band::<WC, WN, WX, V, 4, false, O>(a, lv, y0, out, ring)
+    segment::<WC, WN, WX, V, 4, false, O>(a, lv, first, out, ring)
 }
 
 #[inline(always)]
-fn band_t<const WC: bool, const WN: bool, const WX: bool, O: Sink>(
+fn segment_t<const WC: bool, const WN: bool, const WX: bool, O: Sink>(
     a: &LevelInput,
     lv: &Level,
-    y0: usize,
+    first: usize,
     out: &mut O,
     ring: &mut [f32],
     isa: Isa,
 ) {
     if a.v.is_some() {
-        band_v::<WC, WN, WX, true, O>(a, lv, y0, out, ring, isa)
+        segment_v::<WC, WN, WX, true, O>(a, lv, first, out, ring, isa)
     } else {
-        band_v::<WC, WN, WX, false, O>(a, lv, y0, out, ring, isa)
+        segment_v::<WC, WN, WX, false, O>(a, lv, first, out, ring, isa)
     }
 }
 
-fn band_any<O: Sink>(a: &LevelInput, lv: &Level, y0: usize, out: &mut O, ring: &mut [f32], isa: Isa) {
+fn segment_any<O: Sink>(a: &LevelInput, lv: &Level, first: usize, out: &mut O, ring: &mut [f32], isa: Isa) {
     let terms = (lv.inv[0] > 0.0, lv.inv[1] > 0.0, lv.inv[2] > 0.0);
     match terms {
-        (false, false, false) => band_t::<false, false, false, O>(a, lv, y0, out, ring, isa),
-        (true, false, false) => band_t::<true, false, false, O>(a, lv, y0, out, ring, isa),
-        (false, true, false) => band_t::<false, true, false, O>(a, lv, y0, out, ring, isa),
-        (false, false, true) => band_t::<false, false, true, O>(a, lv, y0, out, ring, isa),
-        (true, true, false) => band_t::<true, true, false, O>(a, lv, y0, out, ring, isa),
-        (true, false, true) => band_t::<true, false, true, O>(a, lv, y0, out, ring, isa),
-        (false, true, true) => band_t::<false, true, true, O>(a, lv, y0, out, ring, isa),
-        (true, true, true) => band_t::<true, true, true, O>(a, lv, y0, out, ring, isa),
+        (false, false, false) => segment_t::<false, false, false, O>(a, lv, first, out, ring, isa),
+        (true, false, false) => segment_t::<true, false, false, O>(a, lv, first, out, ring, isa),
+        (false, true, false) => segment_t::<false, true, false, O>(a, lv, first, out, ring, isa),
+        (false, false, true) => segment_t::<false, false, true, O>(a, lv, first, out, ring, isa),
+        (true, true, false) => segment_t::<true, true, false, O>(a, lv, first, out, ring, isa),
+        (true, false, true) => segment_t::<true, false, true, O>(a, lv, first, out, ring, isa),
+        (false, true, true) => segment_t::<false, true, true, O>(a, lv, first, out, ring, isa),
+        (true, true, true) => segment_t::<true, true, true, O>(a, lv, first, out, ring, isa),
     }
 }
 
-/// Rows per parallel band: one band per thread (two per thread measured 12% more CPU time,
-/// 1080p, 2 threads: more start-up rows and more ring buffers taken from the pool), at least
-/// `8 step` rows so the `2 step` start-up rows of the chains stay a small share.
-fn band_rows(h: usize, step: usize) -> usize {
-    let threads = rayon::current_num_threads().max(1);
-    h.div_ceil(threads).max(8 * step).max(1)
-}
-
-/// Largest ring of weight rows per band (bytes): 16 MB, rows up to ~100 000 pixels wide.
+/// Largest ring of weight rows per segment (bytes): 16 MB, rows up to ~100 000 pixels wide.
 const MAX_RING_BYTES: usize = 16 << 20;
 
 /// True when the ring of weight rows of a level with step width `step` stays below
@@ -633,34 +561,24 @@ pub(crate) fn atrous_level(a: &LevelInput, step: usize, terms: RangeTerms, dst: 
     debug_assert!(inv.iter().all(|v| v.is_finite() && *v >= 0.0));
     let lv = Level::new(w, a.stride, step, inv);
     let isa = isa();
-    let rows = band_rows(h, step);
+    let segs = segments(h, step, rayon::current_num_threads());
     let ring_len = 12 * lv.ring_rows * lv.ring_width;
     // Zero padding of the ring: out-of-row neighbours of the gather read weight 0.
     match dst {
-        BandOut::Planes([d0, d1, d2]) => {
-            let band = rows * a.stride;
-            d0.par_chunks_mut(band)
-                .zip(d1.par_chunks_mut(band))
-                .zip(d2.par_chunks_mut(band))
-                .enumerate()
-                .for_each(|(b, ((o0, o1), o2))| {
-                    let mut ring = crate::pool::Buf::zeros(ring_len);
-                    band_any(
-                        a,
-                        &lv,
-                        b * rows,
-                        &mut PlanesSink { o: [o0, o1, o2], stride: a.stride },
-                        &mut ring,
-                        isa,
-                    );
-                })
+        BandOut::Planes(d) => {
+            let sinks = PlanesSink::per_segment(d, a.stride, step, &segs);
+            segs.into_par_iter().zip(sinks).for_each(|(seg, mut sink)| {
+                let mut ring = crate::pool::Buf::zeros(ring_len);
+                segment_any(a, &lv, seg.first, &mut sink, &mut ring, isa);
+            })
         }
         BandOut::Rgb(img) => {
             debug_assert_eq!(img.len(), 3 * w * h);
-            img.par_chunks_mut(rows * 3 * w).enumerate().for_each(|(b, o)| {
+            let rows = rows_of(img, 3 * w, step, &segs);
+            segs.into_par_iter().zip(rows).for_each(|(seg, rows)| {
                 let mut ring = crate::pool::Buf::zeros(ring_len);
                 let tmp = [vec![0.0f32; a.stride], vec![0.0f32; a.stride], vec![0.0f32; a.stride]];
-                band_any(a, &lv, b * rows, &mut RgbSink { o, width: w, tmp }, &mut ring, isa);
+                segment_any(a, &lv, seg.first, &mut RgbSink { rows, width: w, tmp }, &mut ring, isa);
             })
         }
     }

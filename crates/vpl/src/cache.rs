@@ -30,6 +30,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod alpha_max;
+mod feedback;
 mod history;
 mod optimize;
 mod placement;
@@ -42,8 +43,9 @@ mod vpl_set;
 mod tests;
 
 pub use alpha_max::{alpha_max_owner, alpha_max_weight};
+pub use feedback::SampleFeedback;
 pub use history::{SampleHistory, StoredSample};
-pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, SampleFeedback, StepOutcome};
+pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, StepOutcome};
 pub use placement::{place_cache_points, GBufferView};
 pub use record::{CacheRecord, ImportanceCache, VplCdf};
 pub use sampler::{sample_uniform_vpl, SamplePlan, VplDraw, MAX_DRAWS};

@@ -10,7 +10,7 @@
 //! numbers hashed from (record, arrival number), so the kept set depends only on the order
 //! of the feedback, never on the thread count.
 
-use super::optimize::SampleFeedback;
+use super::feedback::SampleFeedback;
 use super::TECHNIQUES;
 use filtrace_core::rng::splitmix64;
 use rayon::prelude::*;

@@ -17,7 +17,7 @@
 //!   Georgiev interpolates), weight `w_k^α-max(j_k) / P_k(j_k)`.
 
 use super::alpha_max::alpha_max_owner;
-use super::optimize::SampleFeedback;
+use super::feedback::SampleFeedback;
 use super::search::Neighbours;
 use super::{ImportanceCache, SamplerKind, Technique, MAX_NEIGHBOURS, TECHNIQUES};
 use filtrace_core::Rgb;

@@ -196,6 +196,35 @@ pub fn power_heuristic(nf: f32, f_pdf: f32, ng: f32, g_pdf: f32) -> f32 {
     }
 }
 
+/// The CDF of sanitised (finite, non-negative) weights `func` and their sum: `cdf[i]` =
+/// probability of cells `< i`, `cdf[n] = 1`, length `n + 1`; uniform when the sum is 0 or
+/// not finite (a sum that is not finite is returned as 0). Accumulated in f64:
+/// thousands of lights with a wide power range lose precision in f32. Shared by
+/// [`Distribution1D`] and the VPL renderer's cached distributions, so both give the same
+/// values bit for bit.
+pub fn normalized_cdf(func: &[f32]) -> (Vec<f32>, f32) {
+    let n = func.len();
+    let total64: f64 = func.iter().map(|&w| w as f64).sum();
+    let mut cdf = Vec::with_capacity(n + 1);
+    cdf.push(0.0f32);
+    if total64 > 0.0 && total64.is_finite() {
+        let mut acc = 0.0f64;
+        for &w in func {
+            acc += w as f64;
+            cdf.push((acc / total64) as f32);
+        }
+    } else {
+        for i in 1..=n {
+            cdf.push(i as f32 / n as f32);
+        }
+    }
+    if n > 0 {
+        cdf[n] = 1.0;
+    }
+    let total = if total64.is_finite() { total64 as f32 } else { 0.0 };
+    (cdf, total)
+}
+
 /// A piecewise-constant distribution over `n` cells of `[0, 1)` built from non-negative
 /// weights (pbrt-v4 `PiecewiseConstant1D`). Used to pick lights by power and sky bands by
 /// luminance.
@@ -220,26 +249,7 @@ impl Distribution1D {
     pub fn new(weights: &[f32]) -> Self {
         let func: Vec<f32> =
             weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 }).collect();
-        let n = func.len();
-        // Accumulate in f64: thousands of lights with a wide power range lose precision in f32.
-        let total64: f64 = func.iter().map(|&w| w as f64).sum();
-        let mut cdf = Vec::with_capacity(n + 1);
-        cdf.push(0.0f32);
-        if total64 > 0.0 && total64.is_finite() {
-            let mut acc = 0.0f64;
-            for &w in &func {
-                acc += w as f64;
-                cdf.push((acc / total64) as f32);
-            }
-        } else {
-            for i in 1..=n {
-                cdf.push(i as f32 / n as f32);
-            }
-        }
-        if n > 0 {
-            cdf[n] = 1.0;
-        }
-        let total = if total64.is_finite() { total64 as f32 } else { 0.0 };
+        let (cdf, total) = normalized_cdf(&func);
         Distribution1D { func, cdf, total }
     }
 

@@ -4,6 +4,7 @@
 use super::optimize::RecordParams;
 use super::search::{KdTree, Neighbours};
 use super::{CacheParams, CachePoint, RecordValues, Technique, VplSet, TECHNIQUES};
+use filtrace_core::sampling::normalized_cdf;
 use filtrace_core::{luminance, Rgb, Vec3};
 use rayon::prelude::*;
 
@@ -126,23 +127,8 @@ impl VplCdf {
         let func: Vec<f32> =
             weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 }).collect();
         let n = func.len();
-        let total64: f64 = func.iter().map(|&w| w as f64).sum();
-        let mut cdf = Vec::with_capacity(n + 1);
-        cdf.push(0.0f32);
-        if total64 > 0.0 && total64.is_finite() {
-            let mut acc = 0.0f64;
-            cdf.extend(func.iter().map(|&w| {
-                acc += w as f64;
-                (acc / total64) as f32
-            }));
-        } else {
-            cdf.extend((1..=n).map(|i| i as f32 / n as f32));
-        }
-        if n > 0 {
-            cdf[n] = 1.0;
-        }
+        let (cdf, total) = normalized_cdf(&func);
         let coarse = (0..n.div_ceil(CDF_BLOCK)).map(|b| cdf[((b + 1) * CDF_BLOCK).min(n)]).collect();
-        let total = if total64.is_finite() { total64 as f32 } else { 0.0 };
         VplCdf { cdf, coarse, total }
     }
 

@@ -4,6 +4,10 @@ use filtrace_core::Image;
 use filtrace_pipeline::*;
 use filtrace_render::{RenderSettings, Renderer};
 
+#[path = "support/frames.rs"]
+mod frames;
+use frames::assert_frames_identical;
+
 fn renderer(w: u32, h: u32, max_depth: i32, seed: u64) -> Renderer {
     let scene = filtrace_scene::builtin::builtin("cornell").expect("built-in Cornell box");
     Renderer::new(scene, RenderSettings { width: w, height: h, spp: 1, max_depth, seed }).unwrap()
@@ -72,31 +76,6 @@ impl PathSource for PerPixel<'_> {
     }
     fn resolution(&self) -> Option<(u32, u32)> {
         self.0.resolution()
-    }
-}
-
-/// Every layer of a frame, bit for bit.
-fn assert_frames_identical(a: &Frame, b: &Frame, what: &str) {
-    let (a, b) = (&a.images, &b.images);
-    let layers = [
-        ("color", &a.color, &b.color),
-        ("noisy", &a.noisy, &b.noisy),
-        ("direct", &a.direct, &b.direct),
-        ("indirect", &a.indirect, &b.indirect),
-        ("indirect_map", &a.indirect_map, &b.indirect_map),
-        ("filtered_map", &a.filtered_map, &b.filtered_map),
-        ("normal", &a.guide.normal, &b.guide.normal),
-        ("albedo", &a.guide.albedo, &b.guide.albedo),
-        ("position", &a.guide.position, &b.guide.position),
-        ("depth", &a.guide.depth, &b.guide.depth),
-    ];
-    for (name, x, y) in layers {
-        assert!(x.same_size(y), "{what}: {name} sizes differ");
-        let bits = |i: &Image| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        let (bx, by) = (bits(x), bits(y));
-        if let Some(k) = bx.iter().zip(&by).position(|(p, q)| p != q) {
-            panic!("{what}: {name}[{k}] differs: {} vs {}", x.data()[k], y.data()[k]);
-        }
     }
 }
 

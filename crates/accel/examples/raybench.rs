@@ -33,6 +33,7 @@ fn main() -> Result<(), String> {
             "--ctrav" => opts.build.traversal_cost = val()?.parse().map_err(|e| format!("--ctrav: {e}"))?,
             "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,
             "--block" => opts.build.leaf_block = val()?.parse().map_err(|e| format!("--block: {e}"))?,
+            "--split" => opts.build.split_budget = val()?.parse().map_err(|e| format!("--split: {e}"))?,
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),

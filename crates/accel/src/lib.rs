@@ -83,6 +83,7 @@ mod flat_blas;
 mod packet;
 #[cfg(target_arch = "x86_64")]
 mod packet_two_level;
+mod presplit;
 mod ray_packet;
 mod refit;
 pub mod sah;
@@ -152,6 +153,9 @@ pub struct BvhStats {
     /// Four-triangle packets; `triangles / (4 packets)` is the lane occupancy.
     pub packets: usize,
     pub triangles: usize,
+    /// Packet lanes in use: `triangles` plus the copies of split triangles stored in more
+    /// than one leaf ([`BuildParams::split_budget`]).
+    pub references: usize,
     pub top_level_nodes: usize,
     /// SAH cost of the wide bottom levels (node visits + packet tests per random ray
     /// hitting the root box, relative to the root area), summed over meshes.
@@ -463,6 +467,7 @@ impl SceneAccel {
             st.nodes += b.node_count();
             st.packets += b.tris().map_or(0, |t| t.packets.len());
             st.triangles += b.tri_count();
+            st.references += b.tris().map_or(0, |t| t.prim_ids.iter().filter(|&&id| id != u32::MAX).count());
             st.leaves += b.leaf_count();
             st.sah_cost += b.sah_cost();
         }

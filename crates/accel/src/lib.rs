@@ -33,6 +33,10 @@
 //! no hierarchy: their triangles fall into a few groups (SAH-clustered: walls, blocks and
 //! light of the Cornell box apart) whose padded boxes are tested before the triangles
 //! (`packet::flat_layout`; boxes only cull, the hits stay those of testing every triangle).
+//! Optionally ([`BuildParams::split_budget`], off in the presets) long thin diagonal
+//! triangles are pre-split before a bottom level is built (`presplit.rs`, Karras & Aila
+//! 2013): the builder gets the boxes of clipped pieces, and a leaf stores each triangle it
+//! references once.
 //! Triangle boxes are padded a little (`packet::padded_boxes`) so that no box culls a hit
 //! the watertight test's rounding puts just outside it. Measurements against Embree 4:
 //! `docs/perf-accel.md` and `docs/performance.md` (1 thread, incoherent closest hits,

@@ -62,12 +62,14 @@ impl Refs {
 /// reference per triangle in order).
 pub(crate) fn presplit(boxes: &[Aabb], corners: impl Fn(usize) -> [Vec3; 3], budget: f32) -> Refs {
     let n = boxes.len();
-    let extra = (f64::from(budget.max(0.0)) * n as f64).min(u32::MAX as f64) as usize;
+    // (At most `MAX_SPLITS_PER_TRIANGLE` per triangle can be used, whatever the budget.)
+    let extra = (f64::from(budget.max(0.0)) * n as f64).min((n * MAX_SPLITS_PER_TRIANGLE) as f64) as usize;
     let grid = Grid::new(boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union));
     let priority: Vec<f64> =
         if extra == 0 { Vec::new() } else { (0..n).map(|i| grid.priority(&boxes[i], &corners(i))).collect() };
     let scale = budget_scale(&priority, extra);
-    let mut refs = Refs { tri: Vec::with_capacity(n + extra), boxes: Vec::with_capacity(n + extra) };
+    let capacity = n + extra.min(n);
+    let mut refs = Refs { tri: Vec::with_capacity(capacity), boxes: Vec::with_capacity(capacity) };
     for (i, &b) in boxes.iter().enumerate() {
         let splits = priority.get(i).map_or(0, |p| (scale * p) as usize).min(MAX_SPLITS_PER_TRIANGLE);
         if splits == 0 {

@@ -172,3 +172,16 @@ fn coarsest_plane_matches_a_search_over_levels() {
     }
     assert!(found > 20000, "{found} planes found");
 }
+
+/// A budget beyond what the per-triangle limit can use neither allocates for it nor
+/// exceeds the limit.
+#[test]
+fn huge_budgets_stop_at_the_per_triangle_limit() {
+    let tris = blade_triangles(20, 1);
+    let boxes: Vec<Aabb> = tris.iter().map(|&t| Aabb::from_points(t)).collect();
+    for budget in [1e9, f32::INFINITY] {
+        let refs = presplit(&boxes, |i| tris[i], budget);
+        assert!(refs.tri.len() <= tris.len() * (MAX_SPLITS_PER_TRIANGLE + 1), "{budget}: {}", refs.tri.len());
+        assert!(refs.tri.len() > 10 * tris.len(), "{budget}: {}", refs.tri.len());
+    }
+}

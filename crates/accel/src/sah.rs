@@ -55,7 +55,7 @@ pub struct BuildParams {
 /// none. On the suite's meshes (grass, engine, bunny-room, bunny, teapot) splitting with a
 /// budget of 0.3 changed the SAH cost by -1..+2 % and ray speed within the noise, and
 /// cost up to twice the build time; it pays on long thin diagonal triangles
-/// (`testmesh::thin_blades`: SAH -13 %, closest hits +15-25 %), see `docs/perf-accel.md`
+/// (`testmesh::thin_blades`: SAH -13 %, closest hits +17 %), see `docs/perf-accel.md`
 /// "Stop 15".
 const SPLIT_BUDGET: f32 = 0.0;
 

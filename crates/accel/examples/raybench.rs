@@ -1,10 +1,12 @@
 //! Ray throughput from the command line, until `filtrace bench rays` is wired:
 //!
 //! `cargo run --release -p filtrace-accel --example raybench -- SCENE [--rays N] [--res WxH]
-//!  [--threads T] [--repeats K] [--json] [--write-obj PATH]`
+//!  [--threads T] [--repeats K] [--split B] [--json] [--write-obj PATH]`
 //!
 //! `SCENE` is a scene file or built-in name (`filtrace_scene::load_scene`) or
-//! `sphere:N` for `testmesh::displaced_sphere(N, 0.1)` (`sphere:150` has 270k triangles).
+//! `sphere:N` for `testmesh::displaced_sphere(N, 0.1)` (`sphere:150` has 270k triangles)
+//! or `blades:N` for `testmesh::thin_blades(N, 1)`; `--split B` sets
+//! `BuildParams::split_budget` (pre-splitting of long thin triangles).
 //! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
 
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
@@ -33,6 +35,7 @@ fn main() -> Result<(), String> {
             "--ctrav" => opts.build.traversal_cost = val()?.parse().map_err(|e| format!("--ctrav: {e}"))?,
             "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,
             "--block" => opts.build.leaf_block = val()?.parse().map_err(|e| format!("--block: {e}"))?,
+            "--split" => opts.build.split_budget = val()?.parse().map_err(|e| format!("--split: {e}"))?,
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),

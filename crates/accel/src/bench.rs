@@ -178,8 +178,15 @@ impl RayBenchReport {
 }
 
 /// The scene a benchmark driver names: `sphere:N` for `testmesh::displaced_sphere(N, 0.1)`
-/// (`sphere:150` has 270k triangles), else a scene file or built-in scene name.
+/// (`sphere:150` has 270k triangles), `blades:N` for `testmesh::thin_blades(N, 1)`, else a
+/// scene file or built-in scene name.
 pub fn bench_scene(spec: &str) -> Result<Scene, String> {
+    if let Some(n) = spec.strip_prefix("blades:") {
+        let n: usize = n.parse().map_err(|e| format!("blades:N: {e}"))?;
+        let mut s = Scene { name: format!("thin_blades_{n}"), ..Scene::default() };
+        s.add_mesh(crate::testmesh::thin_blades(n, 1));
+        return Ok(s);
+    }
     let Some(n) = spec.strip_prefix("sphere:") else {
         return filtrace_scene::load_scene(spec).map_err(|e| e.to_string());
     };

@@ -5,6 +5,7 @@
 //! kernels it was built for (4 for [`Simd::Sse`], 8 for [`Simd::Avx2`]).
 
 use crate::flat_blas::{padded_boxes, FlatBlas};
+use crate::presplit::{self, presplit};
 use crate::tri4::{self, Ray4, Tri4, TriPackets};
 use crate::triangle::WatertightRay;
 use crate::wide::{self, RayBoxes, WideNode};
@@ -13,6 +14,7 @@ use crate::{avx2, avx2_packet};
 use crate::{closer, sah, BuildParams, Simd};
 use filtrace_core::{Aabb, Vec3};
 use filtrace_scene::Mesh;
+use std::collections::HashMap;
 
 /// The bottom level of one mesh, by layout.
 #[derive(Clone, Debug, Default)]
@@ -66,18 +68,25 @@ impl Blas {
         // a hair behind a wall can hit it at `t = -0.0`, outside the wall's unpadded (flat)
         // box; brute force reports that hit, so the boxes must not cull it
         // (tests/flat_culling.rs).
-        let boxes = padded_boxes(&boxes);
         if ids.len() <= params.max_flat_triangles {
-            return Blas::Flat(FlatBlas::build(&ids, &boxes, tri));
+            return Blas::Flat(FlatBlas::build(&ids, &padded_boxes(&boxes), tri));
         }
+        // The BVH is built over references: pieces of long thin triangles, or one per
+        // triangle when splitting is off (`refs.tri` indexes `ids`).
+        let refs = presplit(&boxes, |k| tri(ids[k] as usize), params.split_budget);
+        let boxes = padded_boxes(&refs.boxes);
+        let ref_ids: Vec<u32> = refs.tri.iter().map(|&k| ids[k as usize]).collect();
+        let tri_count = ids.len();
         match simd {
-            Simd::Sse => WideBvh::build(&ids, &boxes, tri, params).map_or(Blas::Empty, Blas::Bvh4),
+            Simd::Sse => {
+                WideBvh::build(&ref_ids, tri_count, &boxes, tri, params).map_or(Blas::Empty, Blas::Bvh4)
+            }
             // The AVX2 kernels test two packets at once, so their SAH counts blocks of
             // twice the size (270k sphere, incoherent rays: +12 % closest, +15 % any hit
             // over blocks of 4; bunny +2-4 %).
             Simd::Avx2 => {
                 let params = BuildParams { leaf_block: 2 * params.leaf_block, ..params.clone() };
-                WideBvh::build(&ids, &boxes, tri, &params).map_or(Blas::Empty, Blas::Bvh8)
+                WideBvh::build(&ref_ids, tri_count, &boxes, tri, &params).map_or(Blas::Empty, Blas::Bvh8)
             }
         }
     }
@@ -183,10 +192,27 @@ impl Blas {
 
     pub(crate) fn validate(&self) -> Result<(), String> {
         let Some(tris) = self.tris() else { return Ok(()) };
-        let packet_box = |p: usize| tris.packet_box(p);
+        // A triangle split over several leaves (`presplit.rs`) need only have its piece
+        // in each leaf's box, checked by `split_coverage`; the others lie in their leaf's.
+        let copies = lane_copies(&tris.prim_ids);
+        let split = |p: usize, l: usize| copies.get(&tris.prim_ids[4 * p + l]).is_some_and(|&c| c > 1);
+        let whole_box = |p: usize| {
+            if !(0..4).any(|l| split(p, l)) {
+                return tris.packet_box(p);
+            }
+            (0..4).filter(|&l| tris.packets[p].used(l) && !split(p, l)).fold(Aabb::EMPTY, |b, l| {
+                b.union(Aabb::from_points(tris.packets[p].lane(l).map(Vec3::from_array)))
+            })
+        };
         match self {
-            Blas::Bvh4(b) => wide::validate(&b.nodes, tris.packets.len(), packet_box)?,
-            Blas::Bvh8(b) => wide::validate(&b.nodes, tris.packets.len(), packet_box)?,
+            Blas::Bvh4(b) => {
+                wide::validate(&b.nodes, tris.packets.len(), whole_box)?;
+                split_coverage(&b.nodes, tris, &copies)?;
+            }
+            Blas::Bvh8(b) => {
+                wide::validate(&b.nodes, tris.packets.len(), whole_box)?;
+                split_coverage(&b.nodes, tris, &copies)?;
+            }
             _ => {}
         }
         // Triangles in id order within every leaf (the AVX2 closest-hit tie rule needs it).
@@ -198,7 +224,8 @@ impl Blas {
                 return Err(format!("leaf {first}+{count} not in id order: {lanes:?}"));
             }
         }
-        // Every stored triangle in exactly one lane, unused lanes marked as such.
+        // Every stored triangle in a lane (in several only when split), unused lanes
+        // marked as such.
         let mut ids: Vec<u32> = Vec::with_capacity(tris.tri_count);
         for (i, &id) in tris.prim_ids.iter().enumerate() {
             if tris.packets[i / 4].used(i % 4) != (id != u32::MAX) {
@@ -215,6 +242,46 @@ impl Blas {
         }
         Ok(())
     }
+}
+
+/// How many lanes hold each triangle id (more than one: split over several leaves).
+fn lane_copies(prim_ids: &[u32]) -> HashMap<u32, u32> {
+    let mut copies = HashMap::new();
+    for &id in prim_ids.iter().filter(|&&id| id != u32::MAX) {
+        *copies.entry(id).or_insert(0) += 1;
+    }
+    copies
+}
+
+/// Every sampled point of a triangle stored in several leaves lies in one of their boxes.
+fn split_coverage<const W: usize>(
+    nodes: &[WideNode<W>],
+    tris: &TriPackets,
+    copies: &HashMap<u32, u32>,
+) -> Result<(), String> {
+    let mut leaf_boxes: HashMap<u32, ([Vec3; 3], Vec<Aabb>)> = HashMap::new();
+    for n in nodes {
+        for slot in (0..W).filter(|&i| n.count[i] > 0) {
+            for p in n.child[slot]..n.child[slot] + n.count[slot] {
+                for l in 0..4 {
+                    let id = tris.prim_ids[4 * p as usize + l];
+                    if copies.get(&id).is_some_and(|&c| c > 1) {
+                        let corners = tris.packets[p as usize].lane(l).map(Vec3::from_array);
+                        leaf_boxes.entry(id).or_insert((corners, Vec::new())).1.push(n.child_box(slot));
+                    }
+                }
+            }
+        }
+    }
+    for (id, (corners, boxes)) in leaf_boxes {
+        if let Some(p) = presplit::uncovered_point(&corners, &boxes) {
+            return Err(format!(
+                "point {p} of split triangle {id} in none of its {} leaf boxes",
+                boxes.len()
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn sah_cost_of<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
@@ -236,24 +303,27 @@ fn sah_cost_of<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
 }
 
 impl<const W: usize> WideBvh<W> {
-    /// The binned SAH tree over `boxes` (triangles `ids`, `tri(id)` the corners) collapsed
-    /// to `W`-wide nodes; `None` when the builder returns no tree.
+    /// The binned SAH tree over `boxes` (references to triangles `ids`, `tri(id)` the
+    /// corners; `tri_count` distinct ones) collapsed to `W`-wide nodes; `None` when the
+    /// builder returns no tree.
     fn build(
         ids: &[u32],
+        tri_count: usize,
         boxes: &[Aabb],
         tri: impl Fn(usize) -> [Vec3; 3],
         params: &BuildParams,
     ) -> Option<Self> {
         let (root, order) = sah::build_binary(boxes, params);
         let root = root?;
-        let mut tris = TriPackets { tri_count: ids.len(), bounds: root.bounds(), ..TriPackets::default() };
+        let mut tris = TriPackets { tri_count, bounds: root.bounds(), ..TriPackets::default() };
         let mut leaf = |first: u32, count: u32| {
             let start = tris.packets.len() as u32;
             // Leaf triangles in id order: the AVX2 leaf test then meets ties in id order
-            // (see `avx2::closest_in`).
+            // (see `avx2::closest_in`); pieces of one split triangle are stored once.
             let mut leaf: Vec<u32> =
                 order[first as usize..(first + count) as usize].iter().map(|&k| ids[k as usize]).collect();
             leaf.sort_unstable();
+            leaf.dedup();
             for chunk in leaf.chunks(4) {
                 tris.push(chunk, |i| tri(i as usize).map(|v| v.to_array()));
             }

@@ -33,6 +33,10 @@
 //! no hierarchy: their triangles fall into a few groups (SAH-clustered: walls, blocks and
 //! light of the Cornell box apart) whose padded boxes are tested before the triangles
 //! (`packet::flat_layout`; boxes only cull, the hits stay those of testing every triangle).
+//! Optionally ([`BuildParams::split_budget`], off in the presets) long thin diagonal
+//! triangles are pre-split before a bottom level is built (`presplit.rs`, Karras & Aila
+//! 2013): the builder gets the boxes of clipped pieces, and a leaf stores each triangle it
+//! references once.
 //! Triangle boxes are padded a little (`packet::padded_boxes`) so that no box culls a hit
 //! the watertight test's rounding puts just outside it. Measurements against Embree 4:
 //! `docs/perf-accel.md` and `docs/performance.md` (1 thread, incoherent closest hits,
@@ -83,6 +87,7 @@ mod flat_blas;
 mod packet;
 #[cfg(target_arch = "x86_64")]
 mod packet_two_level;
+mod presplit;
 mod ray_packet;
 mod refit;
 pub mod sah;
@@ -152,6 +157,9 @@ pub struct BvhStats {
     /// Four-triangle packets; `triangles / (4 packets)` is the lane occupancy.
     pub packets: usize,
     pub triangles: usize,
+    /// Packet lanes in use: `triangles` plus the copies of split triangles stored in more
+    /// than one leaf ([`BuildParams::split_budget`]).
+    pub references: usize,
     pub top_level_nodes: usize,
     /// SAH cost of the wide bottom levels (node visits + packet tests per random ray
     /// hitting the root box, relative to the root area), summed over meshes.
@@ -463,6 +471,7 @@ impl SceneAccel {
             st.nodes += b.node_count();
             st.packets += b.tris().map_or(0, |t| t.packets.len());
             st.triangles += b.tri_count();
+            st.references += b.tris().map_or(0, |t| t.prim_ids.iter().filter(|&&id| id != u32::MAX).count());
             st.leaves += b.leaf_count();
             st.sah_cost += b.sah_cost();
         }

@@ -44,7 +44,20 @@ pub struct BuildParams {
     /// incoherent closest and +50 % any hit (primary -10-25 %); a 48-triangle displaced
     /// sphere even (primary -11 %); 108 triangles -18 % closest.
     pub max_flat_triangles: usize,
+    /// Pre-splitting of long thin triangles in bottom levels (`presplit.rs`, Karras &
+    /// Aila 2013): up to `split_budget * n` extra references to the `n` triangles, each
+    /// the box of a clipped piece of a triangle whose box is much larger than it; leaves
+    /// may then reference a triangle more than once. 0 turns it off.
+    pub split_budget: f32,
 }
+
+/// Extra references the presets allow for split triangles (a fraction of the triangles):
+/// none. On the suite's meshes (grass, engine, bunny-room, bunny, teapot) splitting with a
+/// budget of 0.3 changed the SAH cost by -1..+2 % and ray speed within the noise, and
+/// cost up to twice the build time; it pays on long thin diagonal triangles
+/// (`testmesh::thin_blades`: SAH -13 %, closest hits +17 %), see `docs/perf-accel.md`
+/// "Stop 15".
+const SPLIT_BUDGET: f32 = 0.0;
 
 impl BuildParams {
     /// Fewest bins: fastest build, slightly slower traversal.
@@ -57,6 +70,7 @@ impl BuildParams {
             leaf_block: 4,
             parallel_threshold: 4096,
             max_flat_triangles: 40,
+            split_budget: SPLIT_BUDGET,
         }
     }
 
@@ -70,6 +84,7 @@ impl BuildParams {
             leaf_block: 4,
             parallel_threshold: 4096,
             max_flat_triangles: 40,
+            split_budget: SPLIT_BUDGET,
         }
     }
 
@@ -83,6 +98,7 @@ impl BuildParams {
             leaf_block: 4,
             parallel_threshold: 4096,
             max_flat_triangles: 40,
+            split_budget: SPLIT_BUDGET,
         }
     }
 

@@ -4,6 +4,8 @@
 //! - [`displaced_sphere`]: a closed, bumpy sphere from the same grid (n = 150 gives
 //!   270,000 triangles, the stand-in for the 268k-triangle mesh of the Embree figures);
 //! - [`icosphere`]: a closed unit sphere with shared vertex indices;
+//! - [`thin_blades`]: long thin slanted grass blades on a ground quad, the triangles
+//!   whose boxes are far larger than themselves (for the pre-splitting of `presplit.rs`);
 //! - [`read_obj`]: positions and faces of a Wavefront OBJ (no materials), for benchmarks
 //!   until the scene loaders are used.
 //!
@@ -136,6 +138,45 @@ pub fn icosphere(level: usize) -> Mesh {
         indices = next;
     }
     mesh_from(&format!("icosphere_{level}"), positions, indices)
+}
+
+/// `count` grass blades on the ground quad `[-1, 1]^2` at `y = 0` (2 triangles): each
+/// blade is 5 triangles (three tapering segments and a tip), 0.4-1 high and 0.01-0.03
+/// wide at the base, leaning up to 45 degrees in a random direction and facing another,
+/// so that most triangles are long, thin and diagonal to every axis. `5 count + 2`
+/// triangles, positions from `seed`.
+pub fn thin_blades(count: usize, seed: u64) -> Mesh {
+    let mut rng = SplitMix64(seed);
+    let mut positions = vec![
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, 1.0),
+        Vec3::new(-1.0, 0.0, 1.0),
+    ];
+    let mut indices = vec![[0, 2, 1], [0, 3, 2]];
+    for _ in 0..count {
+        let base = Vec3::new(2.0 * rng.next_f32() - 1.0, 0.0, 2.0 * rng.next_f32() - 1.0);
+        let height = 0.4 + 0.6 * rng.next_f32();
+        let width = 0.01 + 0.02 * rng.next_f32();
+        let (lean_angle, face_angle) =
+            (std::f32::consts::TAU * rng.next_f32(), std::f32::consts::TAU * rng.next_f32());
+        let lean = Vec3::new(lean_angle.cos(), 0.0, lean_angle.sin()) * height * rng.next_f32();
+        let side = Vec3::new(face_angle.cos(), 0.0, face_angle.sin()) * (0.5 * width);
+        let first = positions.len() as u32;
+        for j in 0..3 {
+            let f = j as f32 / 3.0;
+            let centre = base + Vec3::Y * (height * f) + lean * (f * f);
+            positions.extend([centre - side * (1.0 - f), centre + side * (1.0 - f)]);
+        }
+        positions.push(base + Vec3::Y * height + lean);
+        let at = |k: u32| first + k;
+        for j in 0..2 {
+            let (l0, r0, l1, r1) = (at(2 * j), at(2 * j + 1), at(2 * j + 2), at(2 * j + 3));
+            indices.extend([[l0, r0, r1], [l0, r1, l1]]);
+        }
+        indices.push([at(4), at(5), at(6)]);
+    }
+    mesh_from(&format!("thin_blades_{count}"), positions, indices)
 }
 
 /// Reads the vertices (`v`) and faces (`f`, fan-triangulated; `v/vt/vn` forms and

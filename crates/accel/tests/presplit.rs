@@ -1,0 +1,166 @@
+//! Pre-split bottom levels (`BuildParams::split_budget`) against brute force: a mesh of
+//! long thin slanted blades, whose triangles are split over several leaves, gives the
+//! same closest hits (bits of `t`, `u`, `v`, the triangle) and any hits, single rays and
+//! 8-ray packets, alone and instanced, for every preset, budget and kernel; and its tree
+//! is not worse by the surface area heuristic than the one built without splitting.
+
+use filtrace_accel::testmesh::{self, SplitMix64};
+use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, LANES};
+use filtrace_core::{Affine3A, Quat, Ray, Vec3};
+use filtrace_scene::{Instance, Scene};
+
+fn kernels() -> Vec<Simd> {
+    if Simd::Avx2.available() {
+        vec![Simd::Sse, Simd::Avx2]
+    } else {
+        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
+        vec![Simd::Sse]
+    }
+}
+
+fn blades(count: usize, seed: u64) -> Scene {
+    let mut s = Scene::default();
+    s.add_mesh(testmesh::thin_blades(count, seed));
+    s
+}
+
+/// The blades twice more, rotated and scaled (two-level BVH), beside the identity one.
+fn instanced_blades() -> Scene {
+    let mut s = blades(300, 8);
+    let place = |scale: f32, rot: Quat, t: Vec3| Instance {
+        mesh: 0,
+        transform: Affine3A::from_scale_rotation_translation(Vec3::splat(scale), rot, t),
+        material_override: None,
+    };
+    s.instances.push(place(0.7, Quat::from_rotation_y(0.8), Vec3::new(2.5, 0.2, 0.0)));
+    s.instances.push(place(1.3, Quat::from_rotation_x(0.4), Vec3::new(-0.5, 0.5, 2.5)));
+    s
+}
+
+/// Rays from inside the bounds in random directions, rays from outside aimed inside, and
+/// short segments.
+fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = scene.bounds();
+    let (c, r) = (b.center(), b.bounding_radius());
+    let mut rng = SplitMix64(seed);
+    (0..n)
+        .map(|i| {
+            let inside = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
+            match i % 3 {
+                0 => Ray::new(inside, rng.unit_vector()),
+                1 => {
+                    let o = c + rng.unit_vector() * 2.0 * r;
+                    Ray::new(o, inside - o)
+                }
+                _ => Ray::segment(inside, rng.unit_vector(), 0.0, 0.3 * r * rng.next_f32()),
+            }
+        })
+        .collect()
+}
+
+fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
+    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
+}
+
+/// Single-ray and packet queries of `accel` equal brute force on `rays`; returns the hits.
+fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
+    let mut hits = 0;
+    for ray in rays {
+        let want = brute.intersect(ray);
+        assert_eq!(bits(accel.intersect(ray)), bits(want), "{name}: ray {ray:?}");
+        assert_eq!(accel.occluded(ray), want.is_some(), "{name}: occlusion of {ray:?}");
+        hits += want.is_some() as usize;
+    }
+    for chunk in rays.chunks(LANES) {
+        let (packet, active) = RayPacket::from_rays(chunk);
+        let (closest, occluded) =
+            (accel.intersect_packet(&packet, active), accel.occluded_packet(&packet, active));
+        for (i, ray) in chunk.iter().enumerate() {
+            let want = brute.intersect(ray);
+            assert_eq!(bits(closest.lane(i)), bits(want), "{name}: packet lane {i}, ray {ray:?}");
+            assert_eq!(occluded & (1 << i) != 0, want.is_some(), "{name}: packet occlusion of {ray:?}");
+        }
+    }
+    hits
+}
+
+fn check_scene(scene: &Scene, n: usize, seed: u64) {
+    let brute = BruteForce::build(scene);
+    // Camera rays too: eight neighbours of a row make a coherent packet, which takes the
+    // AVX2 packet traversal of a single BVH mesh rather than one query per lane.
+    let mut rays = random_rays(scene, n, seed);
+    rays.extend(filtrace_accel::bench::primary_rays(scene, 32, 16));
+    let n = rays.len();
+    for (preset, params) in BuildParams::presets() {
+        for budget in [0.3, 1.0, 4.0] {
+            let params = BuildParams { split_budget: budget, ..params.clone() };
+            for simd in kernels() {
+                let accel = SceneAccel::build_simd(scene, &params, simd);
+                let stats = accel.stats();
+                let name = format!("{preset} budget {budget} {simd:?} ({stats:?})");
+                accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+                assert!(stats.references > stats.triangles, "{name}: nothing split");
+                let hits = check_rays(&accel, &brute, &rays, &name);
+                assert!(hits > n / 10 && hits < n * 9 / 10, "{name}: {hits} of {n} rays hit");
+            }
+        }
+    }
+}
+
+#[test]
+fn split_thin_blades_match_brute_force() {
+    check_scene(&blades(800, 7), 1500, 1);
+}
+
+#[test]
+fn split_instanced_blades_match_brute_force() {
+    check_scene(&instanced_blades(), 1500, 2);
+}
+
+/// Rays along the blades' split planes' neighbourhood: aimed at vertices and edge
+/// midpoints of every blade triangle (split pieces meet there), from above.
+#[test]
+fn rays_at_blade_vertices_and_edges_match_brute_force() {
+    let scene = blades(200, 9);
+    let brute = BruteForce::build(&scene);
+    let mesh = &scene.meshes[0];
+    let origin = Vec3::new(0.1, 3.0, -0.2);
+    let mut rays = Vec::new();
+    for i in 0..mesh.triangle_count() {
+        let [a, b, c] = mesh.triangle(i);
+        for target in [a, b, c, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a), (a + b + c) / 3.0] {
+            rays.push(Ray::new(origin, target - origin));
+        }
+    }
+    for simd in kernels() {
+        let params = BuildParams { split_budget: 1.0, ..BuildParams::default() };
+        let accel = SceneAccel::build_simd(&scene, &params, simd);
+        check_rays(&accel, &brute, &rays, &format!("{simd:?}"));
+    }
+}
+
+/// Splitting lowers the expected cost of a random ray on thin diagonal triangles, the
+/// more the larger the budget.
+#[test]
+fn splitting_lowers_the_sah_cost_of_thin_blades() {
+    let scene = blades(3000, 5);
+    for simd in kernels() {
+        let cost = |budget: f32| {
+            let params = BuildParams { split_budget: budget, ..BuildParams::default() };
+            SceneAccel::build_simd(&scene, &params, simd).stats().sah_cost
+        };
+        let (plain, some, more) = (cost(0.0), cost(0.3), cost(1.0));
+        println!("{simd:?}: SAH cost {plain:.2} without splitting, {some:.2} at budget 0.3, {more:.2} at 1");
+        assert!(more < some && some < plain, "{simd:?}: SAH cost {plain} {some} {more} at budgets 0, 0.3, 1");
+    }
+}
+
+/// The presets leave splitting off: it did not pay on the suite's meshes (`sah.rs`).
+#[test]
+fn presets_do_not_split() {
+    for (name, params) in BuildParams::presets() {
+        assert_eq!(params.split_budget, 0.0, "{name}");
+        let accel = SceneAccel::build_with(&blades(100, 3), &params);
+        assert_eq!(accel.stats().references, accel.stats().triangles, "{name}");
+    }
+}

@@ -59,6 +59,10 @@
 //! their object space and BVH instances per lane (`packet_two_level.rs`). Other packets
 //! and CPUs without AVX2 take one single-ray query per lane.
 //!
+//! **Segments from one origin** ([`SegmentFan`], [`SceneAccel::occluded_fan`];
+//! `shared_origin.rs`): the visibility rays of the VPL cache, grouped by [`fan_class`] so
+//! that the packet kernels take them; per lane bit-identical to [`SceneAccel::occluded`].
+//!
 //! [`BruteForce`] answers the same queries by testing every triangle; tests compare the
 //! two. [`bench::ray_bench`] measures throughput (used by `filtrace bench rays`), and
 //! [`testmesh`] generates meshes for tests and benchmarks.
@@ -91,6 +95,7 @@ mod presplit;
 mod ray_packet;
 mod refit;
 pub mod sah;
+mod shared_origin;
 pub mod testmesh;
 mod tri4;
 pub mod triangle;
@@ -99,6 +104,7 @@ mod wide;
 pub use brute::BruteForce;
 pub use ray_packet::{HitPacket, RayPacket, LANES};
 pub use sah::BuildParams;
+pub use shared_origin::{fan_class, SegmentFan, FAN_CLASSES, FAN_MAX_SPREAD};
 
 use blas::Blas;
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};

@@ -175,7 +175,7 @@ impl SceneAccel {
     /// must be moved into its object space ([`Self::object_space_rays`]; not for the merged
     /// meshes and untransformed instances, whose rays are used as they are, without a copy).
     #[inline]
-    fn single_object(&self) -> Option<(u32, bool)> {
+    pub(crate) fn single_object(&self) -> Option<(u32, bool)> {
         let object = self.single?;
         Some((object, object != MERGED && !self.instances[object as usize].identity))
     }
@@ -183,7 +183,7 @@ impl SceneAccel {
     /// The single object's rays and lanes to trace: `rays` as they are, or (`transformed`)
     /// moved into its object space, in `local`.
     #[inline(always)]
-    fn object_rays<'a>(
+    pub(crate) fn object_rays<'a>(
         &self,
         object: u32,
         transformed: bool,

@@ -52,7 +52,7 @@ pub use sampler::{sample_uniform_vpl, SamplePlan, VplDraw, MAX_DRAWS};
 pub use search::{cache_distance, KdTree, Nearest, Neighbours, MAX_NEIGHBOURS};
 pub use vpl_set::{
     evaluate_each_vpl, relaxed_geometry_term, relaxed_geometry_term_fast, relaxed_geometry_term_towards,
-    RecordValues, VplSet,
+    RecordValues, Region, RelaxedReceiver, VplSet,
 };
 
 use filtrace_core::Vec3;

@@ -3,7 +3,7 @@
 
 use super::optimize::RecordParams;
 use super::search::{KdTree, Neighbours};
-use super::{CacheParams, CachePoint, RecordValues, Technique, VplSet, TECHNIQUES};
+use super::{CacheParams, CachePoint, RecordValues, Region, Technique, VplSet, TECHNIQUES};
 use filtrace_core::sampling::normalized_cdf;
 use filtrace_core::{luminance, Rgb, Vec3};
 use rayon::prelude::*;
@@ -230,9 +230,9 @@ impl ImportanceCache {
             .par_iter()
             .enumerate()
             .map_init(RecordValues::default, |values, (i, &point)| {
-                let (radius, cone) = neighbourhood(&tree, &points, i, config.neighbours, scene_diagonal);
-                vpls.evaluate_record(&point, radius, values);
-                CacheRecord::new(point, radius, cone, values)
+                let region = neighbourhood(&tree, &points, i, config.neighbours, scene_diagonal);
+                vpls.evaluate_record(&point, &region, values);
+                CacheRecord::new(point, region.radius, region.normal_cone, values)
             })
             .collect();
         let mut cache =
@@ -309,7 +309,7 @@ impl ImportanceCache {
 
 /// Radius and normal cone of record `i`: over its M nearest other records, the largest
 /// distance and the largest normal angle.
-fn neighbourhood(tree: &KdTree, points: &[CachePoint], i: usize, m: usize, diagonal: f32) -> (f32, f32) {
+fn neighbourhood(tree: &KdTree, points: &[CachePoint], i: usize, m: usize, diagonal: f32) -> Region {
     let p = points[i];
     let nearest = tree.nearest(p.position, p.normal, m + 1);
     let (mut radius, mut cone, mut found) = (0.0f32, 0.0f32, false);
@@ -320,9 +320,9 @@ fn neighbourhood(tree: &KdTree, points: &[CachePoint], i: usize, m: usize, diago
         found = true;
     }
     if found {
-        (radius, cone)
+        Region { radius, normal_cone: cone }
     } else {
-        (LONE_RECORD_RADIUS * diagonal, 0.0)
+        Region { radius: LONE_RECORD_RADIUS * diagonal, normal_cone: 0.0 }
     }
 }
 

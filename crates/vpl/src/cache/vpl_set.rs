@@ -27,18 +27,29 @@ pub trait VplSet: Sync {
     fn visible(&self, vpl: usize, site: &CachePoint) -> bool;
 
     /// The bounded contribution E³_VPL: `E f` times the relaxed geometry term
-    /// `cos θ0_min cos θVPL_min / r²_min` over the ball of `radius` around the record
-    /// (see [`relaxed_geometry_term`]). Must be > 0 wherever some point of the
-    /// neighbourhood can receive light from the VPL.
-    fn bounded(&self, vpl: usize, site: &CachePoint, radius: f32) -> Rgb;
+    /// `cos θ0_min cos θVPL_min / r²_min` over the record's neighbourhood, receivers in
+    /// the ball of `region.radius` around it whose normals deviate from the record's by up
+    /// to `region.normal_cone` (see [`relaxed_geometry_term`]). Must be > 0 wherever some
+    /// receiver of the neighbourhood can receive light from the VPL.
+    fn bounded(&self, vpl: usize, site: &CachePoint, region: &Region) -> Rgb;
 
     /// Evaluates every VPL at one record into `out` (already sized to `vpl_count()`).
     /// The default calls the three methods per VPL and casts a visibility ray only where
     /// the unoccluded contribution is positive. Override it to trace the record's
     /// visibility rays as a packet: they share the record's point as origin.
-    fn evaluate_record(&self, site: &CachePoint, radius: f32, out: &mut RecordValues) {
-        evaluate_each_vpl(self, site, radius, out);
+    fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {
+        evaluate_each_vpl(self, site, region, out);
     }
+}
+
+/// The neighbourhood a record's bounded distribution E³ covers: the ball of `radius`
+/// around the record (the distance to the farthest of its M nearest records) and the
+/// receivers' normals within `normal_cone` radians of the record's (the largest angle to
+/// those records' normals).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Region {
+    pub radius: f32,
+    pub normal_cone: f32,
 }
 
 /// [`VplSet::evaluate_record`] one VPL and one visibility ray at a time: the default, and
@@ -46,7 +57,7 @@ pub trait VplSet: Sync {
 pub fn evaluate_each_vpl<S: VplSet + ?Sized>(
     set: &S,
     site: &CachePoint,
-    radius: f32,
+    region: &Region,
     out: &mut RecordValues,
 ) {
     out.clear(set.vpl_count());
@@ -54,7 +65,7 @@ pub fn evaluate_each_vpl<S: VplSet + ?Sized>(
         let unoccluded = set.unoccluded(j, site);
         let visible = luminance(unoccluded) > 0.0 && set.visible(j, site);
         let full = if visible { unoccluded } else { Rgb::ZERO };
-        out.set(j, full, unoccluded, set.bounded(j, site, radius));
+        out.set(j, full, unoccluded, set.bounded(j, site, region));
     }
 }
 
@@ -170,13 +181,44 @@ pub fn relaxed_geometry_term_towards(
     radius: f32,
     normal_cone: f32,
 ) -> f32 {
-    let sin_delta = (radius / r).min(1.0);
-    let cos_delta = (1.0 - sin_delta * sin_delta).max(0.0).sqrt();
-    let delta = Slack { cos: cos_delta, sin: sin_delta, at_least_pi: false };
-    let cos0 = delta.widened(normal_cone).relax(n0.dot(w));
-    let cos_vpl = n_vpl.map_or(1.0, |n| delta.relax(n.dot(-w)));
-    let r_min = (r - radius).max(radius).max(f32::MIN_POSITIVE.sqrt());
-    cos0 * cos_vpl / (r_min * r_min)
+    RelaxedReceiver::new(n0, radius, normal_cone).towards(w, r, n_vpl)
+}
+
+/// The receiver's side of [`relaxed_geometry_term_towards`], prepared once per record:
+/// the cache evaluates the term for every VPL at every record, and the normal cone's
+/// sine and cosine cost as much as the rest of the term.
+#[derive(Clone, Copy, Debug)]
+pub struct RelaxedReceiver {
+    n0: Vec3,
+    radius: f32,
+    /// `(sin, cos)` of the normal cone clamped to `[0, π]`; `None` for a cone of 0.
+    cone: Option<(f32, f32)>,
+}
+
+impl RelaxedReceiver {
+    /// A receiver at normal `n0` standing for the ball of `radius` and the normal cone.
+    #[inline]
+    pub fn new(n0: Vec3, radius: f32, normal_cone: f32) -> Self {
+        let cone = (normal_cone != 0.0).then(|| normal_cone.clamp(0.0, std::f32::consts::PI).sin_cos());
+        RelaxedReceiver { n0, radius, cone }
+    }
+
+    /// The relaxed term towards a VPL at distance `r > 0` along the unit direction `w`.
+    #[inline]
+    pub fn towards(&self, w: Vec3, r: f32, n_vpl: Option<Vec3>) -> f32 {
+        let radius = self.radius;
+        let sin_delta = (radius / r).min(1.0);
+        let cos_delta = (1.0 - sin_delta * sin_delta).max(0.0).sqrt();
+        let delta = Slack { cos: cos_delta, sin: sin_delta, at_least_pi: false };
+        let receiver = match self.cone {
+            Some((sin_c, cos_c)) => delta.widened(sin_c, cos_c),
+            None => delta,
+        };
+        let cos0 = receiver.relax(self.n0.dot(w));
+        let cos_vpl = n_vpl.map_or(1.0, |n| delta.relax(n.dot(-w)));
+        let r_min = (r - radius).max(radius).max(f32::MIN_POSITIVE.sqrt());
+        cos0 * cos_vpl / (r_min * r_min)
+    }
 }
 
 /// An angle `s ∈ [0, π]` as its cosine and sine, or "at least π".
@@ -188,13 +230,10 @@ struct Slack {
 }
 
 impl Slack {
-    /// `s + cone` for `cone ∈ [0, π]` (angle sum; `s + cone ≥ π ⟺ cos cone ≤ −cos s`).
+    /// `s + cone` for the angle `cone ∈ [0, π]` given as its sine and cosine (angle sum;
+    /// `s + cone ≥ π ⟺ cos cone ≤ −cos s`).
     #[inline]
-    fn widened(self, cone: f32) -> Slack {
-        if cone == 0.0 {
-            return self;
-        }
-        let (sin_c, cos_c) = cone.clamp(0.0, std::f32::consts::PI).sin_cos();
+    fn widened(self, sin_c: f32, cos_c: f32) -> Slack {
         Slack {
             cos: self.cos * cos_c - self.sin * sin_c,
             sin: self.sin * cos_c + self.cos * sin_c,

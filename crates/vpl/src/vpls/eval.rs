@@ -87,19 +87,47 @@ impl Receiver {
 /// the receiver.
 #[inline]
 pub fn contribution(vpl: &Vpl, rx: &Receiver, bound: GeometryBound) -> (Rgb, Vec3, f32) {
+    let (c, w, r, _) = contribution_parts(vpl, rx, bound);
+    (c, w, r)
+}
+
+/// The BSDF values [`contribution`] finds on its way, for a caller that evaluates more at
+/// the same pair (the cache's bounded term needs both BSDFs in the same directions).
+#[derive(Clone, Copy, Debug)]
+pub struct PairParts {
+    /// The direction towards the VPL in the receiver's shading frame.
+    pub wi: Vec3,
+    /// `f(wo, wi)` of the receiver (without the cosine).
+    pub f_rx: Rgb,
+    /// A surface VPL's `f(to receiver, wi_local)`; `None` where the contribution stopped
+    /// before it (the receiver reflects nothing that way) and for other kinds.
+    pub f_vpl: Option<Rgb>,
+}
+
+/// [`contribution`] with its [`PairParts`] (`None` for distant VPLs and degenerate
+/// distances).
+#[inline]
+pub fn contribution_parts(
+    vpl: &Vpl,
+    rx: &Receiver,
+    bound: GeometryBound,
+) -> (Rgb, Vec3, f32, Option<PairParts>) {
     if let VplKind::Distant = vpl.kind {
-        return (vpl.weight * rx.reflect(vpl.n), vpl.n, f32::INFINITY);
+        return (vpl.weight * rx.reflect(vpl.n), vpl.n, f32::INFINITY, None);
     }
     let d = vpl.p - rx.si.p;
     let r2 = d.length_squared();
     if r2.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !r2.is_finite() {
-        return (Rgb::ZERO, Vec3::Z, 0.0);
+        return (Rgb::ZERO, Vec3::Z, 0.0, None);
     }
     let r = r2.sqrt();
     let w = d / r;
-    let f0 = rx.reflect(w);
+    let wi = rx.frame.to_local(w);
+    let f_rx = rx.bsdf.f(rx.wo, wi);
+    let mut parts = PairParts { wi, f_rx, f_vpl: None };
+    let f0 = f_rx * wi.z.abs();
     if f0 == Rgb::ZERO {
-        return (Rgb::ZERO, w, r);
+        return (Rgb::ZERO, w, r, Some(parts));
     }
     let emitted = match vpl.kind {
         VplKind::Emitter { two_sided } => {
@@ -109,11 +137,13 @@ pub fn contribution(vpl: &Vpl, rx: &Receiver, bound: GeometryBound) -> (Rgb, Vec
         }
         VplKind::Surface { bsdf, frame, wi_local } => {
             let to_rx = frame.to_local(-w);
-            bsdf.f(to_rx, wi_local) * vpl.weight * (to_rx.z.abs() * bound.inv_dist2(r2))
+            let f_vpl = bsdf.f(to_rx, wi_local);
+            parts.f_vpl = Some(f_vpl);
+            f_vpl * vpl.weight * (to_rx.z.abs() * bound.inv_dist2(r2))
         }
         VplKind::Point => vpl.weight / r2,
         VplKind::Spot { light } => vpl.weight * (light.falloff(-w.dot(light.axis)) / r2),
         VplKind::Distant => unreachable!("handled above"),
     };
-    (emitted * f0, w, r)
+    (emitted * f0, w, r, Some(parts))
 }

@@ -5,12 +5,10 @@
 //! Direct and indirect follow the path tracer's split: emission seen directly and direct
 //! VPLs (depth 0) are `direct`, the rest `indirect`.
 
-use super::eval::{contribution, Receiver};
+use super::eval::{contribution, contribution_parts, PairParts, Receiver};
 use super::{Vpl, VplKind, Vpls};
-use crate::cache::{
-    relaxed_geometry_term_fast, relaxed_geometry_term_towards, CachePoint, RecordValues, VplSet,
-};
-use filtrace_accel::{RayPacket, SceneAccel, LANES};
+use crate::cache::{relaxed_geometry_term_fast, CachePoint, RecordValues, Region, RelaxedReceiver, VplSet};
+use filtrace_accel::{fan_class, SceneAccel, SegmentFan, FAN_CLASSES, LANES};
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{luminance, Ray, Rgb, Vec3};
 use filtrace_render::film::{Film, VisibleSurface};
@@ -111,6 +109,10 @@ pub struct SceneVpls<'a> {
     pub receivers: &'a [Option<Receiver>],
 }
 
+/// Smallest `|wi.z|` [`f_folded`] keeps; at or above it a `wi` in the upper hemisphere
+/// is left as it is.
+const FOLD_Z: f32 = 1e-3;
+
 /// `f(wo, wi)` with `wi` folded into the upper hemisphere: a positive stand-in where the
 /// exact direction is below the horizon, for the bounded distribution only (which must
 /// not vanish where a neighbour could receive light).
@@ -118,7 +120,8 @@ pub struct SceneVpls<'a> {
 fn f_folded(bsdf: &filtrace_render::bsdf::SurfaceBsdf, wo: Vec3, wi: Vec3) -> Rgb {
     let z = wi.z.abs();
     // A unit `wi` stays unit when folded; only the clamp near the horizon needs a normalise.
-    let folded = if z >= 1e-3 { Vec3::new(wi.x, wi.y, z) } else { Vec3::new(wi.x, wi.y, 1e-3).normalize() };
+    let folded =
+        if z >= FOLD_Z { Vec3::new(wi.x, wi.y, z) } else { Vec3::new(wi.x, wi.y, FOLD_Z).normalize() };
     bsdf.f(wo, folded)
 }
 
@@ -128,83 +131,119 @@ impl SceneVpls<'_> {
     }
 
     /// `E f_VPL f0` at folded directions times the relaxed geometry term (the cache's
-    /// [`relaxed_geometry_term_fast`]); distant VPLs have no distance to relax. The
-    /// direction and distance are found once for both; a receiver that reflects nothing
-    /// towards the camera (seen from behind) gets 0 without the rest.
-    fn bounded_at(&self, v: &Vpl, rx: &Receiver, radius: f32) -> Rgb {
+    /// [`RelaxedReceiver`]); distant VPLs have no distance to relax.
+    fn bounded_at(&self, v: &Vpl, rx: &Receiver, region: &Region, relaxed: &RelaxedReceiver) -> Rgb {
         if let VplKind::Distant = v.kind {
             return v.weight * f_folded(&rx.bsdf, rx.wo, rx.frame.to_local(v.n));
         }
         let d = v.p - rx.si.p;
         let r = d.length();
         if !(r > 0.0 && r.is_finite()) {
-            let n_vpl = v.surface_normal();
+            let (n_vpl, Region { radius, normal_cone }) = (v.surface_normal(), *region);
             let f0 = f_folded(&rx.bsdf, rx.wo, Vec3::Z);
-            return v.weight * f0 * relaxed_geometry_term_fast(rx.si.p, rx.si.n_s, v.p, n_vpl, radius, 0.0);
+            let g = relaxed_geometry_term_fast(rx.si.p, rx.si.n_s, v.p, n_vpl, radius, normal_cone);
+            return v.weight * f0 * g;
         }
         let w = d / r;
-        let f0 = f_folded(&rx.bsdf, rx.wo, rx.frame.to_local(w));
-        if f0 == Rgb::ZERO {
-            return Rgb::ZERO;
-        }
-        let (emit, n_vpl) = match v.kind {
-            // A two-sided emitter lights the receiver's side with the face towards it.
-            VplKind::Emitter { two_sided } => {
-                (v.weight, Some(if two_sided && v.n.dot(w) > 0.0 { -v.n } else { v.n }))
-            }
-            VplKind::Surface { bsdf, frame, wi_local } => {
-                (f_folded(&bsdf, frame.to_local(-w), wi_local) * v.weight, Some(v.n))
-            }
-            VplKind::Point | VplKind::Spot { .. } | VplKind::Distant => (v.weight, None),
-        };
-        emit * f0 * relaxed_geometry_term_towards(rx.si.n_s, w, r, n_vpl, radius, 0.0)
+        let wi = rx.frame.to_local(w);
+        let parts = PairParts { wi, f_rx: f_folded(&rx.bsdf, rx.wo, wi), f_vpl: None };
+        bounded_towards(v, rx, w, r, &parts, relaxed)
     }
 }
 
-/// The visibility rays of one record, gathered into 8-ray packets by the octant of their
-/// direction (from one origin, rays of one octant are the coherent ones the packet
-/// kernels like) and traced with [`SceneAccel::occluded_packet`], whose answer per lane is
-/// that of the single-ray query.
+/// The bounded contribution of a VPL at distance `r > 0` along `w` from the receiver,
+/// from the BSDF values [`contribution_parts`] found (`f(wo, wi)` is the folded value
+/// wherever `wi` is above the horizon, where folding changes nothing); a receiver that
+/// reflects nothing towards the camera (seen from behind) gets 0 without the rest.
+#[inline]
+fn bounded_towards(
+    v: &Vpl,
+    rx: &Receiver,
+    w: Vec3,
+    r: f32,
+    parts: &PairParts,
+    relaxed: &RelaxedReceiver,
+) -> Rgb {
+    let f0 = if parts.wi.z >= FOLD_Z { parts.f_rx } else { f_folded(&rx.bsdf, rx.wo, parts.wi) };
+    if f0 == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    let (emit, n_vpl) = match v.kind {
+        // A two-sided emitter lights the receiver's side with the face towards it.
+        VplKind::Emitter { two_sided } => {
+            (v.weight, Some(if two_sided && v.n.dot(w) > 0.0 { -v.n } else { v.n }))
+        }
+        VplKind::Surface { bsdf, frame, wi_local } => {
+            let f_vpl = match parts.f_vpl {
+                Some(f) if wi_local.z >= FOLD_Z => f,
+                _ => f_folded(&bsdf, frame.to_local(-w), wi_local),
+            };
+            (f_vpl * v.weight, Some(v.n))
+        }
+        VplKind::Point | VplKind::Spot { .. } | VplKind::Distant => (v.weight, None),
+    };
+    emit * f0 * relaxed.towards(w, r, n_vpl)
+}
+
+/// The visibility rays of one record as [`SegmentFan`]s: they leave the record's point
+/// (offset to one side of the surface or the other: two origins), and are gathered by
+/// side and [`fan_class`] (octant and dominant axis of the direction, the classes the
+/// packet kernels take as one) into fans of eight, each traced with
+/// [`SceneAccel::occluded_fan`] once full, whose answer per lane is that of the
+/// single-ray query.
 struct ShadowPackets<'a> {
     accel: &'a SceneAccel,
-    packets: [(RayPacket, [u32; LANES], usize); 8],
+    /// The record's two ray origins (`offset_origin` towards and away from `n_g`).
+    origins: [Vec3; 2],
+    /// Per side and class: the fan, the VPLs of its lanes and how many lanes are set.
+    fans: [[(SegmentFan, [u32; LANES], usize); FAN_CLASSES]; 2],
 }
 
 impl<'a> ShadowPackets<'a> {
-    fn new(accel: &'a SceneAccel) -> Self {
-        ShadowPackets { accel, packets: [(RayPacket::default(), [0; LANES], 0); 8] }
+    fn new(accel: &'a SceneAccel, rx: &Receiver) -> Self {
+        let n_g = rx.si.n_g;
+        let origins = [rx.si.offset_origin(n_g), rx.si.offset_origin(-n_g)];
+        let fans = origins.map(|o| [(SegmentFan::new(o, 0.0), [0; LANES], 0); FAN_CLASSES]);
+        ShadowPackets { accel, origins, fans }
     }
 
-    /// Queues the ray deciding VPL `j`'s visibility; full packets are traced at once.
+    /// Queues the ray deciding VPL `j`'s visibility; full fans are traced at once. A ray
+    /// from neither origin (not a shadow ray of the record) is traced alone.
     #[inline]
     fn push(&mut self, j: usize, ray: &Ray, visible: &mut [bool]) {
-        let d = ray.dir;
-        let octant = (d.x < 0.0) as usize | ((d.y < 0.0) as usize) << 1 | ((d.z < 0.0) as usize) << 2;
-        let (packet, ids, len) = &mut self.packets[octant];
-        packet.set_lane(*len, ray);
+        let side = (ray.origin != self.origins[0]) as usize;
+        if ray.origin != self.origins[side] || ray.t_min != 0.0 {
+            visible[j] = !self.accel.occluded(ray);
+            return;
+        }
+        let class = fan_class(ray.dir);
+        let (fan, ids, len) = &mut self.fans[side][class];
+        fan.set_lane(*len, ray.dir, ray.t_max);
         ids[*len] = j as u32;
         *len += 1;
         if *len == LANES {
-            self.trace(octant, visible);
+            self.trace(side, class, visible);
         }
     }
 
-    /// Traces the queued rays of one octant and writes their VPLs' visibility.
-    fn trace(&mut self, octant: usize, visible: &mut [bool]) {
-        let (packet, ids, len) = &mut self.packets[octant];
+    /// Traces the queued rays of one fan and writes their VPLs' visibility.
+    fn trace(&mut self, side: usize, class: usize, visible: &mut [bool]) {
+        let (fan, ids, len) = &mut self.fans[side][class];
         let active = ((1u32 << *len) - 1) as u8;
-        let occluded = self.accel.occluded_packet(packet, active);
+        let occluded = self.accel.occluded_fan(fan, active);
         for (i, &j) in ids[..*len].iter().enumerate() {
             visible[j as usize] = occluded & (1 << i) == 0;
         }
         *len = 0;
     }
 
-    /// Traces what is left in every octant.
+    /// Traces what is left in every fan.
     fn flush(&mut self, visible: &mut [bool]) {
-        for octant in 0..8 {
-            if self.packets[octant].2 > 0 {
-                self.trace(octant, visible);
+        for side in 0..2 {
+            for class in 0..FAN_CLASSES {
+                if self.fans[side][class].2 > 0 {
+                    self.trace(side, class, visible);
+                }
             }
         }
     }
@@ -229,17 +268,20 @@ impl VplSet for SceneVpls<'_> {
     }
 
     /// See `bounded_at`.
-    fn bounded(&self, vpl: usize, site: &CachePoint, radius: f32) -> Rgb {
+    fn bounded(&self, vpl: usize, site: &CachePoint, region: &Region) -> Rgb {
         let Some(rx) = self.receiver(site) else { return Rgb::ZERO };
-        self.bounded_at(&self.vpls.vpls[vpl], rx, radius)
+        let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
+        self.bounded_at(&self.vpls.vpls[vpl], rx, region, &relaxed)
     }
 
     /// The same values as [`evaluate_each_vpl`], bit for bit, with one evaluation of each
-    /// VPL's contribution (the per-VPL methods find it twice) and the visibility rays
-    /// traced as 8-ray packets ([`ShadowPackets`]; VPLs that cannot light the record, e.g.
-    /// behind its surface, get no ray). The RGB totals are summed in VPL order afterwards,
-    /// as the reference does.
-    fn evaluate_record(&self, site: &CachePoint, radius: f32, out: &mut RecordValues) {
+    /// VPL's contribution (the per-VPL methods find it twice), the bounded term from the
+    /// BSDF values the contribution found (`contribution_parts`; the reference evaluates
+    /// both BSDFs again), and the visibility rays traced as fans of eight from the
+    /// record's point ([`ShadowPackets`]; VPLs that cannot light the record, e.g. behind
+    /// its surface, get no ray). The RGB totals are summed in VPL order afterwards, as the
+    /// reference does.
+    fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {
         let n = self.vpls.len();
         out.clear(n);
         let Some(rx) = self.receiver(site) else { return };
@@ -247,13 +289,18 @@ impl VplSet for SceneVpls<'_> {
         rgb.clear();
         visible.clear();
         visible.resize(n, false);
-        let mut packets = ShadowPackets::new(self.ctx.accel);
+        let mut packets = ShadowPackets::new(self.ctx.accel, rx);
+        let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
         for (j, v) in self.vpls.vpls.iter().enumerate() {
-            let (c, w, dist) = contribution(v, rx, self.vpls.bound);
+            let (c, w, dist, parts) = contribution_parts(v, rx, self.vpls.bound);
             if luminance(c) > 0.0 && dist > 0.0 {
                 packets.push(j, &rx.shadow_ray(w, dist), &mut visible);
             }
-            rgb.push((c, self.bounded_at(v, rx, radius)));
+            let bounded = match parts {
+                Some(parts) => bounded_towards(v, rx, w, dist, &parts, &relaxed),
+                None => self.bounded_at(v, rx, region, &relaxed),
+            };
+            rgb.push((c, bounded));
         }
         packets.flush(&mut visible);
         for (j, (&(c, b), &vis)) in rgb.iter().zip(&visible).enumerate() {
@@ -315,8 +362,9 @@ mod packet_tests {
             let (mut packet, mut reference) = (RecordValues::default(), RecordValues::default());
             let (mut visible, mut occluded) = (0, 0);
             for site in &sites {
-                set.evaluate_record(site, 0.1, &mut packet);
-                evaluate_each_vpl(&set, site, 0.1, &mut reference);
+                let region = Region { radius: 0.1, normal_cone: 0.2 };
+                set.evaluate_record(site, &region, &mut packet);
+                evaluate_each_vpl(&set, site, &region, &mut reference);
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&packet.full), bits(&reference.full), "E1 at pixel {}", site.pixel);
                 assert_eq!(

@@ -172,8 +172,8 @@ const STACK8: usize = 7 * MAX_DEPTH + 8;
 
 /// Visits every leaf of the 8-wide BVH `nodes` whose box the ray `[t_min, *t_max]`
 /// touches, as [`crate::wide::traverse`] does for four-wide nodes: near-first for
-/// closest hits (`ORDERED`), in node order for any hits; returns `true` when a visit
-/// asked to stop.
+/// closest hits (`ORDERED`), from the last slot down for any hits (the build-time order
+/// of [`crate::child_order`]); returns `true` when a visit asked to stop.
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(

@@ -18,8 +18,8 @@
 //! Booth 1990, Wald 2007; leaf costs count 4-triangle blocks as Embree's do), then
 //! collapsed into a **4-wide BVH** (Dammertz et al. 2008) whose four child boxes are
 //! tested with one SSE slab test (Williams et al. 2005, robust per Ize 2013). Traversal is
-//! near-first for closest hits, unordered for any hits, and prefetches the children it
-//! will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
+//! near-first for closest hits, in an order fixed at build time for any hits (likely hits
+//! for little work first, `child_order.rs`), and prefetches the children it will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
 //! at a time with the **watertight** algorithm of Woop, Benthin and Wald (JCGT 2013,
 //! [`triangle`]), so rays through shared edges and vertices of closed meshes never slip
 //! through.

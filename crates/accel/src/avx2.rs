@@ -113,8 +113,9 @@ unsafe fn sort_layer<const LOW: i32>(x: __m256i, perm: [i32; 8]) -> __m256i {
 }
 
 /// Closest-hit child ordering for three or more hit children without branches on the
-/// distances: keys `(entry distance bits with the low 3 bits replaced by the lane)`, missed
-/// lanes `i32::MAX`, sorted by the 19-comparator, depth-6 network for 8 inputs (Knuth,
+/// distances: keys `(entry distance bits with the low 3 bits replaced by 7 - lane)`, so
+/// that among equal distances (boxes around the origin) the later slot, the more likely
+/// hit of [`crate::child_order`], goes first; missed lanes `i32::MAX`, sorted by the 19-comparator, depth-6 network for 8 inputs (Knuth,
 /// TAOCP 5.3.4); pushes all but the nearest far-first and returns the nearest. Dropping
 /// 3 mantissa bits only changes the visiting order of nearly equal children, and closest
 /// hits do not depend on the order (the tie rule).
@@ -126,7 +127,7 @@ unsafe fn push_sorted8(
     stack: &mut [MaybeUninit<Entry>],
     sp: &mut usize,
 ) -> Entry {
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let lane = _mm256_setr_epi32(7, 6, 5, 4, 3, 2, 1, 0);
     let keys = _mm256_or_si256(_mm256_andnot_si256(_mm256_set1_epi32(7), _mm256_castps_si256(tn)), lane);
     let hit = _mm256_cmpgt_epi32(
         _mm256_and_si256(_mm256_set1_epi32(mask as i32), _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128)),
@@ -150,7 +151,7 @@ unsafe fn push_sorted8(
         _mm256_store_ps(t.0.as_mut_ptr(), tn);
     }
     let e = |key: i32| {
-        let i = (key & 7) as usize;
+        let i = 7 - (key & 7) as usize;
         Entry { child: node.child[i], count: node.count[i], t: t.0[i] }
     };
     let n = mask.count_ones() as usize;
@@ -171,8 +172,8 @@ const STACK8: usize = 7 * MAX_DEPTH + 8;
 
 /// Visits every leaf of the 8-wide BVH `nodes` whose box the ray `[t_min, *t_max]`
 /// touches, as [`crate::wide::traverse`] does for four-wide nodes: near-first for
-/// closest hits (`ORDERED`), in node order for any hits; returns `true` when a visit
-/// asked to stop.
+/// closest hits (`ORDERED`), from the last slot down for any hits (the build-time order
+/// of [`crate::child_order`]); returns `true` when a visit asked to stop.
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(

@@ -4,6 +4,7 @@
 //! triangles for tiny meshes ([`FlatBlas`]), or a wide BVH whose width is that of the
 //! kernels it was built for (4 for [`Simd::Sse`], 8 for [`Simd::Avx2`]).
 
+use crate::child_order::{self, Odds};
 use crate::flat_blas::{padded_boxes, FlatBlas};
 use crate::presplit::{self, presplit};
 use crate::tri4::{self, Ray4, Tri4, TriPackets};
@@ -38,6 +39,8 @@ pub(crate) enum Blas {
 pub(crate) struct WideBvh<const W: usize> {
     pub nodes: Vec<WideNode<W>>,
     pub tris: TriPackets,
+    /// Any-hit odds of the whole tree, relative to its bounds ([`child_order`]).
+    pub odds: Odds,
 }
 
 impl Blas {
@@ -147,6 +150,21 @@ impl Blas {
             Blas::Flat(f) => f.occluded4(o, d, t_min, t_max),
             Blas::Bvh4(b) => b.occluded4(o, d, t_min, t_max),
             _ => false,
+        }
+    }
+
+    /// Any-hit [`Odds`] of the whole bottom level relative to its bounds (never hit when
+    /// empty; a flat one costs its group test and every packet test).
+    pub(crate) fn odds(&self) -> Odds {
+        match self {
+            Blas::Empty => Odds::default(),
+            Blas::Flat(f) => {
+                let n = f.tris.packets.len() as u32;
+                let o = leaf_odds(&f.tris, &f.tris.bounds, 0, n, 2);
+                Odds { cost: o.cost + 1.0, ..o }
+            }
+            Blas::Bvh4(b) => b.odds,
+            Blas::Bvh8(b) => b.odds,
         }
     }
 
@@ -329,9 +347,29 @@ impl<const W: usize> WideBvh<W> {
             }
             (start, tris.packets.len() as u32 - start)
         };
-        let nodes = wide::collapse(&root, &mut leaf);
-        Some(Self { nodes, tris })
+        let mut nodes = wide::collapse(&root, &mut leaf);
+        let odds = child_order::order_for_any_hit(&mut nodes, |b, first, count| {
+            leaf_odds(&tris, b, first, count, W / 4)
+        });
+        Some(Self { nodes, tris, odds })
     }
+}
+
+/// [`Odds`] of the leaf of packets `first .. first + count` in box `b`, tested
+/// `per_test` packets at a time.
+fn leaf_odds(tris: &TriPackets, b: &Aabb, first: u32, count: u32, per_test: usize) -> Odds {
+    let area: f64 = (first as usize..(first + count) as usize)
+        .flat_map(|p| {
+            let pk = &tris.packets[p];
+            (0..4).filter(|&l| pk.used(l)).map(|l| triangle_area(pk.lane(l)))
+        })
+        .sum();
+    Odds::of_leaf(area, b.surface_area() as f64, (count as usize).div_ceil(per_test.max(1)) as f64)
+}
+
+fn triangle_area(t: crate::triangle::Tri) -> f64 {
+    let [a, b, c] = t.map(|v| Vec3::from_array(v).as_dvec3());
+    0.5 * (b - a).cross(c - a).length()
 }
 
 impl WideBvh<4> {

@@ -18,8 +18,8 @@
 //! Booth 1990, Wald 2007; leaf costs count 4-triangle blocks as Embree's do), then
 //! collapsed into a **4-wide BVH** (Dammertz et al. 2008) whose four child boxes are
 //! tested with one SSE slab test (Williams et al. 2005, robust per Ize 2013). Traversal is
-//! near-first for closest hits, unordered for any hits, and prefetches the children it
-//! will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
+//! near-first for closest hits, in an order fixed at build time for any hits (likely hits
+//! for little work first, `child_order.rs`), and prefetches the children it will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four
 //! at a time with the **watertight** algorithm of Woop, Benthin and Wald (JCGT 2013,
 //! [`triangle`]), so rays through shared edges and vertices of closed meshes never slip
 //! through.
@@ -87,6 +87,7 @@ mod avx2_packet;
 pub mod bench;
 mod blas;
 mod brute;
+mod child_order;
 mod flat_blas;
 mod packet;
 #[cfg(target_arch = "x86_64")]
@@ -458,8 +459,33 @@ impl SceneAccel {
         self.tlas =
             root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
         self.tlas_order = order.iter().map(|&k| objects[k as usize]).collect();
+        self.order_tlas_for_any_hit();
         self.single = (objects.len() == 1).then(|| objects[0]);
         self.tlas_build_cost = refit::sah_cost(&self.tlas);
+    }
+
+    /// The any-hit order of the top level ([`child_order`]): a leaf's objects most
+    /// promising first (leaves test them in order), node slots most promising last.
+    fn order_tlas_for_any_hit(&mut self) {
+        let (mut tlas, mut order) = (std::mem::take(&mut self.tlas), std::mem::take(&mut self.tlas_order));
+        let (merged, meshes) = (self.merged.odds(), self.blas.iter().map(Blas::odds).collect::<Vec<_>>());
+        let object = |o: u32| {
+            let odds = if o == MERGED { merged } else { meshes[self.instances[o as usize].mesh as usize] };
+            (self.object_bounds(o).surface_area() as f64, odds)
+        };
+        for n in &tlas {
+            for s in (0..4).filter(|&s| n.count[s] > 0) {
+                let area = n.child_box(s).surface_area() as f64;
+                let key = |o: u32| child_order::Odds::of_objects(area, [object(o)]).priority();
+                let (first, count) = (n.child[s] as usize, n.count[s] as usize);
+                order[first..first + count].sort_by(|&a, &b| key(b).total_cmp(&key(a)));
+            }
+        }
+        child_order::order_for_any_hit(&mut tlas, |b, first, count| {
+            let objects = order[first as usize..(first + count) as usize].iter().map(|&o| object(o));
+            child_order::Odds::of_objects(b.surface_area() as f64, objects)
+        });
+        (self.tlas, self.tlas_order) = (tlas, order);
     }
 
     fn object_bounds(&self, object: u32) -> Aabb {

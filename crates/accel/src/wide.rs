@@ -36,7 +36,7 @@ pub(crate) type Node4 = WideNode<4>;
 pub(crate) type Node8 = WideNode<8>;
 
 impl<const W: usize> WideNode<W> {
-    const EMPTY: Self = Self {
+    pub(crate) const EMPTY: Self = Self {
         bounds: [
             [f32::INFINITY; W],
             [f32::INFINITY; W],
@@ -54,7 +54,7 @@ impl<const W: usize> WideNode<W> {
         Aabb::new(Vec3::new(b[0][i], b[1][i], b[2][i]), Vec3::new(b[3][i], b[4][i], b[5][i]))
     }
 
-    fn set_child_box(&mut self, i: usize, a: &Aabb) {
+    pub(crate) fn set_child_box(&mut self, i: usize, a: &Aabb) {
         for k in 0..3 {
             self.bounds[k][i] = a.min[k];
             self.bounds[k + 3][i] = a.max[k];
@@ -309,8 +309,8 @@ impl<F: FnMut(u32, u32, &mut f32) -> bool> Leaves for F {
 /// The hit children `mask` (non-zero) of a node, `e(i)` the entry of child `i`: pushes
 /// all but one onto `stack` and returns the one to visit next. `ORDERED` (closest hits):
 /// near-first, the farther entries deepest (two hits, the most common case: one compare;
-/// more: insertion-sorted straight onto the stack); else in slot order. Shared by the
-/// 4-wide and 8-wide traversals.
+/// more: insertion-sorted straight onto the stack), equal distances from the last slot
+/// down; else from the last slot down, the any-hit order of [`crate::child_order`]. Shared by the 4-wide and 8-wide traversals.
 #[inline(always)]
 pub(crate) fn push_children<const ORDERED: bool>(
     mask: u32,
@@ -318,24 +318,27 @@ pub(crate) fn push_children<const ORDERED: bool>(
     stack: &mut [MaybeUninit<Entry>],
     sp: &mut usize,
 ) -> Entry {
-    let first = mask.trailing_zeros() as usize;
-    let rest = mask & (mask - 1);
-    if rest == 0 {
-        return e(first);
-    }
     if !ORDERED {
-        let mut bits = rest;
+        let last = 31 - mask.leading_zeros() as usize;
+        let mut bits = mask & !(1 << last);
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             stack[*sp] = MaybeUninit::new(e(i));
             *sp += 1;
         }
+        return e(last);
+    }
+    let first = mask.trailing_zeros() as usize;
+    let rest = mask & (mask - 1);
+    if rest == 0 {
         return e(first);
     }
     if rest & (rest - 1) == 0 {
         let (a, b) = (e(first), e(rest.trailing_zeros() as usize));
-        let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
+        // Equal distances (both boxes around the origin): the later slot, the more
+        // likely hit (`crate::child_order`), first.
+        let (near, far) = if b.t <= a.t { (b, a) } else { (a, b) };
         stack[*sp] = MaybeUninit::new(far);
         *sp += 1;
         return near;

@@ -37,11 +37,16 @@ pub struct SampleHistory {
     capacity: usize,
 }
 
+/// A record's mixture and control-variate weights `(α', β)`.
+pub(crate) type Weights = ([f32; TECHNIQUES], [f32; TECHNIQUES]);
+
 #[derive(Clone, Debug, Default)]
 struct RecordSamples {
     kept: Vec<StoredSample>,
     /// Samples that arrived (kept or not).
     seen: u64,
+    /// The weights the last optimisation step kept on exactly these samples.
+    settled: Option<Weights>,
 }
 
 impl SampleHistory {
@@ -69,33 +74,58 @@ impl SampleHistory {
         self.records.get(l).map_or(0, |r| r.seen)
     }
 
+    /// The weights the last step of [`super::ImportanceCache::optimize_pass`] kept on
+    /// record `l`'s current samples (`None` once new samples arrived).
+    pub(crate) fn settled(&self, l: usize) -> Option<Weights> {
+        self.records.get(l).and_then(|r| r.settled)
+    }
+
+    /// Notes that a step kept record `l`'s weights on its current samples.
+    pub(crate) fn settle(&mut self, l: usize, weights: Weights) {
+        if let Some(r) = self.records.get_mut(l) {
+            r.settled = Some(weights);
+        }
+    }
+
     /// Adds a pass's feedback, which must come in a fixed order (pixel order): each record
     /// sees its samples in that order. Records out of range and zero weights are skipped.
     pub fn add(&mut self, feedback: &[SampleFeedback]) {
+        self.add_parts(&[feedback]);
+    }
+
+    /// [`SampleHistory::add`] of the parts' feedback one after the other (e.g. per tile,
+    /// in tile order), without gathering it into one list first.
+    pub fn add_parts(&mut self, parts: &[&[SampleFeedback]]) {
         let n = self.records.len();
-        // Per-record lists of (feedback index, weight), in feedback order (CSR).
-        let mut start = vec![0usize; n + 1];
         fn entries(fb: &SampleFeedback, n: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
             fb.records().filter(move |&(l, w)| l < n && w > 0.0)
         }
-        for fb in feedback {
+        let all = || {
+            parts
+                .iter()
+                .enumerate()
+                .flat_map(|(p, fbs)| fbs.iter().enumerate().map(move |(i, fb)| (p, i, fb)))
+        };
+        // Per-record lists of (part, index in it, weight), in feedback order (CSR).
+        let mut start = vec![0usize; n + 1];
+        for (_, _, fb) in all() {
             entries(fb, n).for_each(|(l, _)| start[l + 1] += 1);
         }
         for l in 0..n {
             start[l + 1] += start[l];
         }
         let mut fill = start.clone();
-        let mut list = vec![(0u32, 0.0f32); start[n]];
-        for (i, fb) in feedback.iter().enumerate() {
+        let mut list = vec![(0u32, 0u32, 0.0f32); start[n]];
+        for (p, i, fb) in all() {
             for (l, w) in entries(fb, n) {
-                list[fill[l]] = (i as u32, w);
+                list[fill[l]] = (p as u32, i as u32, w);
                 fill[l] += 1;
             }
         }
         let capacity = self.capacity;
-        self.records.par_iter_mut().enumerate().for_each(|(l, record)| {
-            for &(i, weight) in &list[start[l]..start[l + 1]] {
-                let fb = &feedback[i as usize];
+        self.records.par_iter_mut().enumerate().with_min_len(16).for_each(|(l, record)| {
+            for &(p, i, weight) in &list[start[l]..start[l + 1]] {
+                let fb = &parts[p as usize][i as usize];
                 let s = StoredSample { pmf: fb.pmf, cv: fb.cv, inv_pdf: fb.inv_pdf, value: fb.value, weight };
                 record.push(s, l, capacity);
             }
@@ -107,6 +137,7 @@ impl RecordSamples {
     /// Algorithm R: the first `capacity` samples are kept; arrival `n` then replaces a
     /// uniformly chosen slot with probability `capacity / (n + 1)`.
     fn push(&mut self, s: StoredSample, record: usize, capacity: usize) {
+        self.settled = None;
         let n = self.seen;
         self.seen += 1;
         if self.kept.len() < capacity {

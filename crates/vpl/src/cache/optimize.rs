@@ -191,7 +191,8 @@ pub struct StepOutcome {
     pub params: RecordParams,
     /// Whether a step was taken.
     pub stepped: bool,
-    /// Estimated G at the old and new parameters (equal when no step).
+    /// Estimated G at the old and new parameters (equal when no step; 0 when the record
+    /// has too few samples to estimate it).
     pub objective_before: f64,
     pub objective_after: f64,
 }
@@ -209,18 +210,49 @@ impl ImportanceCache {
     /// One damped Newton step per record on every sample it has accumulated (see the
     /// module docs). A history of another cache's size changes nothing.
     pub fn optimize_history(&mut self, history: &SampleHistory) -> OptimizeStats {
+        self.step_records(history, |_, _| false).0
+    }
+
+    /// [`ImportanceCache::optimize_history`] for a frame's passes, the same parameters
+    /// bit for bit: a record whose samples and parameters are those its last step kept
+    /// is skipped (the step is a function of the two, so it would keep them again), and
+    /// `history` remembers which records this step kept.
+    pub fn optimize_pass(&mut self, history: &mut SampleHistory) -> OptimizeStats {
+        let (stats, outcomes) =
+            self.step_records(history, |l, p| history.settled(l) == Some((p.alpha, p.beta)));
+        for (l, o) in outcomes.iter().enumerate() {
+            if !o.stepped {
+                history.settle(l, (o.params.alpha, o.params.beta));
+            }
+        }
+        stats
+    }
+
+    /// One step per record, `skip(record, parameters)` keeping a record without one; the
+    /// summary and each record's outcome.
+    fn step_records(
+        &mut self,
+        history: &SampleHistory,
+        skip: impl Fn(usize, &RecordParams) -> bool + Sync,
+    ) -> (OptimizeStats, Vec<StepOutcome>) {
         let n = self.records.len();
         if history.len() != n {
-            return OptimizeStats { kept: n, ..OptimizeStats::default() };
+            return (OptimizeStats { kept: n, ..OptimizeStats::default() }, Vec::new());
         }
         let set = self.config.distributions;
         let opt = &self.config.optimizer;
         let outcomes: Vec<StepOutcome> = (0..n)
             .into_par_iter()
-            .map(|l| newton_step(&self.params[l], &set, opt, history.samples(l)))
+            .with_min_len(16)
+            .map(|l| match &self.params[l] {
+                p if skip(l, p) => {
+                    StepOutcome { params: *p, stepped: false, objective_before: 0.0, objective_after: 0.0 }
+                }
+                p => newton_step(p, &set, opt, history.samples(l)),
+            })
             .collect();
         let mut stats = OptimizeStats::default();
-        for (l, o) in outcomes.into_iter().enumerate() {
+        for (l, o) in outcomes.iter().enumerate() {
             self.params[l] = o.params;
             if o.stepped {
                 stats.stepped += 1;
@@ -230,7 +262,7 @@ impl ImportanceCache {
                 stats.kept += 1;
             }
         }
-        stats
+        (stats, outcomes)
     }
 }
 
@@ -248,8 +280,6 @@ fn enabled(set: &DistributionSet) -> ([usize; TECHNIQUES], usize) {
 /// G's sample estimate with its gradient and Hessian over the 2J variables.
 struct Moments {
     weight: f64,
-    /// Σ w², for the effective count (Σ w)² / Σ w².
-    weight_sq: f64,
     objective: f64,
     gradient: [f64; MAX_VARS],
     hessian: [[f64; MAX_VARS]; MAX_VARS],
@@ -259,38 +289,38 @@ struct Moments {
 /// weighted samples, normalised by the weight sum:
 /// `∂G/∂α_k = −r² P_k / s²`, `∂G/∂β_k = −2 r Q_k / s`, `∂²G/∂α_k∂α_m = 2 r² P_k P_m / s³`,
 /// `∂²G/∂β_k∂β_m = 2 Q_k Q_m / s`, `∂²G/∂α_k∂β_m = 2 r P_k Q_m / s²`, each times `1/q0`.
+/// The Hessian of a sample is the rank-one `(2/s) u uᵀ` with `u = (r P / s, Q)`: one
+/// division per sample and the upper triangle only, mirrored at the end.
 fn moments(x: &[f64], ts: &[usize], samples: &[StoredSample]) -> Moments {
     let j = ts.len();
+    let dim = 2 * j;
     let mut m = Moments {
         weight: 0.0,
-        weight_sq: 0.0,
         objective: 0.0,
         gradient: [0.0; MAX_VARS],
         hessian: [[0.0; MAX_VARS]; MAX_VARS],
     };
     for fb in samples {
-        let w = fb.weight;
-        let p: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.pmf[ts[k]] as f64 } else { 0.0 });
-        let q: [f64; TECHNIQUES] = std::array::from_fn(|k| if k < j { fb.cv[ts[k]] as f64 } else { 0.0 });
-        let s: f64 = (0..j).map(|k| x[k] * p[k]).sum();
-        let r = fb.value as f64 - (0..j).map(|k| x[j + k] * q[k]).sum::<f64>();
-        let a = w as f64 * fb.inv_pdf as f64;
-        m.weight += w as f64;
-        m.weight_sq += w as f64 * w as f64;
-        if !(s > 0.0 && a.is_finite() && r.is_finite()) {
-            continue;
-        }
-        m.objective += a * r * r / s;
+        let w = fb.weight as f64;
+        m.weight += w;
+        let Some((a, r, s, u)) = residual(x, ts, fb) else { continue };
+        let inv_s = 1.0 / s;
+        let (ar_s, c) = (a * r * inv_s, 2.0 * a * inv_s);
+        m.objective += ar_s * r;
         for k in 0..j {
-            m.gradient[k] -= a * r * r * p[k] / (s * s);
-            m.gradient[j + k] -= 2.0 * a * r * q[k] / s;
-            for n in 0..j {
-                m.hessian[k][n] += 2.0 * a * r * r * p[k] * p[n] / (s * s * s);
-                m.hessian[j + k][j + n] += 2.0 * a * q[k] * q[n] / s;
-                let cross = 2.0 * a * r * p[k] * q[n] / (s * s);
-                m.hessian[k][j + n] += cross;
-                m.hessian[j + n][k] += cross;
+            m.gradient[k] -= ar_s * u[k];
+            m.gradient[j + k] -= 2.0 * ar_s * u[j + k];
+        }
+        for row in 0..dim {
+            let cu = c * u[row];
+            for col in row..dim {
+                m.hessian[row][col] += cu * u[col];
             }
+        }
+    }
+    for row in 0..dim {
+        for col in 0..row {
+            m.hessian[row][col] = m.hessian[col][row];
         }
     }
     if m.weight > 0.0 {
@@ -300,6 +330,43 @@ fn moments(x: &[f64], ts: &[usize], samples: &[StoredSample]) -> Moments {
         m.hessian.iter_mut().flatten().for_each(|h| *h *= inv);
     }
     m
+}
+
+/// One sample at `x`: its importance weight `a = w / q0`, residual `r`, mixture `s` and
+/// `u = (r P / s, Q)`; `None` when it cannot enter G (s ≤ 0, non-finite values).
+#[inline]
+fn residual(x: &[f64], ts: &[usize], fb: &StoredSample) -> Option<(f64, f64, f64, [f64; MAX_VARS])> {
+    let j = ts.len();
+    let mut u = [0.0f64; MAX_VARS];
+    let (mut s, mut predicted) = (0.0f64, 0.0f64);
+    for (k, &t) in ts.iter().enumerate() {
+        let (p, q) = (fb.pmf[t] as f64, fb.cv[t] as f64);
+        s += x[k] * p;
+        predicted += x[j + k] * q;
+        u[k] = p;
+        u[j + k] = q;
+    }
+    let r = fb.value as f64 - predicted;
+    let a = fb.weight as f64 * fb.inv_pdf as f64;
+    if !(s > 0.0 && a.is_finite() && r.is_finite()) {
+        return None;
+    }
+    let r_s = r / s;
+    u[..j].iter_mut().for_each(|p| *p *= r_s);
+    Some((a, r, s, u))
+}
+
+/// The effective sample count `(Σ w)² / Σ w²` of a record's samples.
+fn effective_count(samples: &[StoredSample]) -> f64 {
+    let (sum, sum_sq) = samples.iter().fold((0.0f64, 0.0f64), |(a, b), fb| {
+        let w = fb.weight as f64;
+        (a + w, b + w * w)
+    });
+    if sum_sq > 0.0 {
+        sum * sum / sum_sq
+    } else {
+        0.0
+    }
 }
 
 /// The barrier `−ρ Σ log(α'_k − ε_k) − ρ log(1 − Σ α'_k)`; +∞ outside the domain.
@@ -338,14 +405,14 @@ pub fn newton_step(
         x[k] = params.alpha[t] as f64;
         x[j + k] = params.beta[t] as f64;
     }
+    // Too few samples: no step, and G is not estimated (reported as 0).
+    if effective_count(samples) < opt.min_samples as f64 {
+        return keep(0.0);
+    }
     let eps: Vec<f64> = ts.iter().map(|&t| opt.min_alpha[t] as f64).collect();
     let m = moments(&x[..dim], ts, samples);
     let g0 = m.objective;
-    let effective = if m.weight_sq > 0.0 { m.weight * m.weight / m.weight_sq } else { 0.0 };
-    if effective < opt.min_samples as f64
-        || !(g0 > 0.0 && g0.is_finite())
-        || !barrier(&x, &eps, 1.0).is_finite()
-    {
+    if !(g0 > 0.0 && g0.is_finite() && barrier(&x, &eps, 1.0).is_finite()) {
         return keep(g0);
     }
     let rho = opt.barrier as f64 * g0;

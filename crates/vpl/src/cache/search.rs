@@ -185,13 +185,14 @@ impl KdTree {
             match node.kind {
                 NodeKind::Leaf { start, end } => {
                     for &i in &self.order[start as usize..end as usize] {
-                        let d = cache_distance(
-                            position,
-                            normal,
-                            self.positions[i as usize],
-                            self.normals[i as usize],
-                            self.lambda,
-                        );
+                        // `d` is the distance plus a term >= 0: a point already farther
+                        // than the k-th is out without the normal term (same `d` else).
+                        let along = (position - self.positions[i as usize]).length();
+                        if out.len == k && along > out.items[k - 1].0 {
+                            continue;
+                        }
+                        let d = along
+                            + self.lambda * (1.0 - normal.dot(self.normals[i as usize])).max(0.0).sqrt();
                         out.insert(k, (d, i));
                     }
                 }

@@ -10,7 +10,9 @@
 //!   control-variate offset to `indirect`, so `color = direct + indirect`;
 //! - `optimized` only: each tile keeps its draws' feedback; [`Integrator::end_pass`] adds
 //!   a finished pass's feedback, in tile order, to the records' [`SampleHistory`] and takes
-//!   one damped Newton step per record, so the next pass samples with the new parameters.
+//!   one damped Newton step per record (skipping records whose samples and parameters did
+//!   not change since their last kept step), so the next pass samples with the new
+//!   parameters.
 //!
 //! Sampler slots: 0 the pixel jitter, 1.. the VPL sampler's numbers in order.
 //! Determinism: VPLs from one sequential stream, records per record, feedback in tile
@@ -281,11 +283,11 @@ impl Integrator for VplIntegrator {
         }
         let t = Instant::now();
         tiles.sort_unstable_by_key(|&(index, _)| index);
-        let feedback: Vec<SampleFeedback> = tiles.into_iter().flat_map(|(_, fb)| fb).collect();
-        learning.history.add(&feedback);
+        let parts: Vec<&[SampleFeedback]> = tiles.iter().map(|(_, fb)| fb.as_slice()).collect();
+        learning.history.add_parts(&parts);
         let mut cache = self.frame.cache.write().unwrap_or_else(PoisonError::into_inner);
         if let Some(cache) = cache.as_mut() {
-            learning.last = cache.optimize_history(&learning.history);
+            learning.last = cache.optimize_pass(&mut learning.history);
             learning.passes += 1;
         }
         learning.optimisation_ms += t.elapsed().as_secs_f64() * 1e3;

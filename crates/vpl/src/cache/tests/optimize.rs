@@ -340,16 +340,51 @@ fn accumulated_passes_never_raise_the_estimated_objective_and_converge() {
 fn history_reservoir_is_bounded_and_deterministic() {
     let fb = |i: usize| SampleFeedback::for_records(&[(i % 3, 0.5)], [0.1; 4], [0.0; 4], 1.0, i as f32);
     let all: Vec<SampleFeedback> = (0..3000).map(fb).collect();
-    let (mut a, mut b) = (SampleHistory::new(3, 100), SampleHistory::new(3, 100));
+    let (mut a, mut b, mut c) =
+        (SampleHistory::new(3, 100), SampleHistory::new(3, 100), SampleHistory::new(3, 100));
     a.add(&all);
     for chunk in all.chunks(7) {
         b.add(chunk);
     }
+    c.add_parts(&all.chunks(11).collect::<Vec<_>>());
     for l in 0..3 {
         assert_eq!((a.samples(l).len(), a.seen(l)), (100, 1000));
         assert_eq!(a.samples(l), b.samples(l), "record {l}: pass boundaries change nothing");
+        assert_eq!(a.samples(l), c.samples(l), "record {l}: feedback in parts changes nothing");
         // A uniform subset of 0..3000 with i % 3 == l: its mean index near 1500.
         let mean = a.samples(l).iter().map(|s| s.value as f64).sum::<f64>() / 100.0;
         assert!((mean - 1500.0).abs() < 4.0 * 866.0 / 10.0, "record {l}: mean index {mean}");
     }
+}
+
+/// `optimize_pass` (which skips records whose samples and parameters are those of their
+/// last kept step) gives the parameters of `optimize_history` bit for bit, pass after
+/// pass, while records keep, step and get no new samples.
+#[test]
+fn optimize_pass_equals_optimize_history() {
+    let mut problem = Problem::new(4, scene_f);
+    let scene = ToyScene::new(VPLS, 4);
+    let x = problem.x;
+    let mut reference = problem.cache.clone();
+    let (mut fast, mut slow) = (SampleHistory::new(1, 256), SampleHistory::new(1, 256));
+    let mut rng = SplitMix64::new(17);
+    let (mut stepped, mut kept) = (0, 0);
+    for pass in 0..40 {
+        let nb = problem.cache.neighbours(x.position, x.normal);
+        let mut feedback = Vec::new();
+        // Every third pass brings no samples: a kept record is then skipped.
+        for _ in 0..if pass % 3 == 2 { 0 } else { 12 } {
+            let plan = problem.cache.sample(SamplerKind::Optimized, &nb, &mut || rng.next_f32());
+            let d = plan.draws()[0];
+            feedback.extend(plan.feedback(0, scene.contribution(d.vpl as usize, x.position, x.normal)));
+        }
+        fast.add(&feedback);
+        slow.add(&feedback);
+        let a = problem.cache.optimize_pass(&mut fast);
+        let b = reference.optimize_history(&slow);
+        assert_eq!(problem.cache.params(), reference.params(), "pass {pass}");
+        assert_eq!((a.stepped, a.kept), (b.stepped, b.kept), "pass {pass}");
+        (stepped, kept) = (stepped + a.stepped, kept + a.kept);
+    }
+    assert!(stepped >= 5 && kept >= 5, "{stepped} steps, {kept} kept: both cases occur");
 }

@@ -1,5 +1,6 @@
-//! Bottom level of the two-level BVH: the acceleration structure of one mesh (or of the
-//! merged identity instances) in object space, with its triangles copied in leaf order.
+//! Bottom level of the two-level BVH: the acceleration structure of one mesh in object
+//! space (or of the merged static instances in world space), with its triangles copied in
+//! leaf order.
 //! One variant per layout, each holding only its own data: a flat list of grouped
 //! triangles for tiny meshes ([`FlatBlas`]), or a wide BVH whose width is that of the
 //! kernels it was built for (4 for [`Simd::Sse`], 8 for [`Simd::Avx2`]).

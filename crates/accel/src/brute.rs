@@ -1,7 +1,7 @@
 //! The naive reference: every triangle of every instance, no hierarchy.
 
 use crate::triangle::{intersect_watertight, Tri, WatertightRay};
-use crate::{invert_transform, object_ray, Hit};
+use crate::{invert_transform, merge, object_ray, Hit, SceneAccel};
 use filtrace_core::{Affine3A, Ray};
 use filtrace_scene::Scene;
 
@@ -29,6 +29,22 @@ impl BruteForce {
             })
             .collect();
         Self { instances }
+    }
+
+    /// The reference for `accel` bit for bit: the instances it merged into world space
+    /// ([`SceneAccel::is_merged`]) are tested as it tests them (world-space copies of their
+    /// triangles against the world ray), the others as [`BruteForce::build`] tests them.
+    /// `build` stays the reference for the transforms themselves (object space).
+    pub fn build_like(scene: &Scene, accel: &SceneAccel) -> Self {
+        let mut out = Self::build(scene);
+        for (i, entry) in out.instances.iter_mut().enumerate() {
+            if accel.is_merged(i as u32) {
+                let n = entry.2.len() as u32;
+                let world = (0..n).map(|p| merge::world_triangle(scene, i as u32, p).map(|v| v.to_array()));
+                *entry = (Affine3A::IDENTITY, true, world.collect());
+            }
+        }
+        out
     }
 
     /// Closest hit with `t` in `[ray.t_min, ray.t_max]`.

@@ -9,10 +9,12 @@
 //! reaches an instance is moved into object space by the instance's inverse affine
 //! transform; the direction is *not* renormalised, so `t` keeps its meaning and the BLAS
 //! hit distance is directly the world hit distance. Moving objects only need
-//! [`SceneAccel::update_transforms`], which rebuilds the (small) top level. Instances with
-//! the identity transform (loaders emit one per object: the Cornell box has eight) are
-//! merged into a single bottom level, and a scene with one object skips the top level
-//! altogether, so small scenes pay no two-level overhead.
+//! [`SceneAccel::update_transforms`], which rebuilds the (small) top level. Instances that
+//! do not move (those not named to [`SceneAccel::build_with_moving`]) are copied into world
+//! space and merged into a single bottom level within a memory budget (`merge.rs`: the
+//! Cornell box's eight identity instances, the glTF engine's 115 transformed ones), and a
+//! scene with one object skips the top level altogether, so static scenes pay no
+//! two-level overhead.
 //!
 //! Both levels are built by the same binary **binned SAH** builder ([`sah`]; MacDonald &
 //! Booth 1990, Wald 2007; leaf costs count 4-triangle blocks as Embree's do), then
@@ -89,6 +91,7 @@ mod blas;
 mod brute;
 mod child_order;
 mod flat_blas;
+mod merge;
 mod packet;
 #[cfg(target_arch = "x86_64")]
 mod packet_two_level;
@@ -103,6 +106,7 @@ pub mod triangle;
 mod wide;
 
 pub use brute::BruteForce;
+pub use merge::{MERGE_FLOOR_TRIANGLES, MERGE_GROWTH};
 pub use ray_packet::{HitPacket, RayPacket, LANES};
 pub use sah::BuildParams;
 pub use shared_origin::{fan_class, SegmentFan, FAN_CLASSES, FAN_MAX_SPREAD};
@@ -228,15 +232,16 @@ pub(crate) fn invert_transform(m: &Affine3A) -> Option<(Affine3A, bool)> {
 pub struct SceneAccel {
     /// One bottom level per mesh (empty for meshes only merged or unused instances use).
     blas: Vec<Blas>,
-    /// One bottom level over the world-space triangles of all instances whose transform
-    /// was the identity at build time (when there are at least two): scenes loaded as
-    /// one instance per object (the Cornell box has eight) then cost one BVH, not a top
-    /// level plus eight. Its `prim_ids` index `merged_refs`.
+    /// One bottom level over the world-space triangles of the instances merged at build
+    /// time (`merge::merge_plan`: static ones within a memory budget, when there are at
+    /// least two): a static scene then costs one BVH, not a top level plus one per
+    /// instance. Its `prim_ids` index `merged_refs`.
     merged: Blas,
     /// `(instance, prim)` of each triangle of `merged`.
     merged_refs: Vec<(u32, u32)>,
-    /// Per scene instance: part of `merged`.
-    is_merged: Vec<bool>,
+    /// Per scene instance: its transform when it was merged into `merged` (copied into
+    /// world space, `merge.rs`), `None` when it has its own top-level entry.
+    merged_at: Vec<Option<Affine3A>>,
     /// Per scene instance: told to move ([`SceneAccel::build_with_moving`]), so never
     /// merged (moving it then costs a top-level update, not a full rebuild).
     moving: Vec<bool>,
@@ -257,7 +262,7 @@ pub struct SceneAccel {
     simd: Simd,
 }
 
-/// Top-level object id of the merged identity instances.
+/// Top-level object id of the merged instances.
 const MERGED: u32 = u32::MAX;
 
 /// A refit top level whose SAH cost grew past this factor of its cost when built is
@@ -280,7 +285,9 @@ pub enum TopLevelUpdate {
 }
 
 impl SceneAccel {
-    /// Builds with the default parameters ([`BuildParams::balanced`]).
+    /// Builds with the default parameters ([`BuildParams::balanced`]). Every instance is
+    /// taken to stay where it is (merged into world space where the budget allows); a
+    /// scene that will move instances names them to [`SceneAccel::build_with_moving`].
     pub fn build(scene: &Scene) -> Self {
         Self::build_with(scene, &BuildParams::default())
     }
@@ -300,7 +307,7 @@ impl SceneAccel {
     }
 
     /// [`SceneAccel::build_simd`] for a scene whose instances `moving` will move (an
-    /// animation's): they are never merged into the identity instances' bottom level, so
+    /// animation's): they are never merged into the static instances' bottom level, so
     /// that moving them is a top-level update ([`SceneAccel::update_instances`]). Indices
     /// out of range are ignored.
     pub fn build_with_moving(scene: &Scene, params: &BuildParams, simd: Simd, moving: &[u32]) -> Self {
@@ -315,31 +322,13 @@ impl SceneAccel {
 
     fn build_keeping_apart(scene: &Scene, params: &BuildParams, simd: Simd, moving: Vec<bool>) -> Self {
         let simd = if simd.available() { simd } else { Simd::Sse };
-        let mesh_of = |i: &filtrace_scene::Instance| scene.meshes.get(i.mesh as usize);
-        let mut is_merged: Vec<bool> = scene
-            .instances
-            .iter()
-            .zip(&moving)
-            .map(|(i, &m)| {
-                !m && i.transform == Affine3A::IDENTITY && mesh_of(i).is_some_and(|m| m.triangle_count() > 0)
-            })
-            .collect();
-        if is_merged.iter().filter(|&&m| m).count() < 2 {
-            is_merged.fill(false);
-        }
-        let merged_refs: Vec<(u32, u32)> = (0..scene.instances.len())
-            .filter(|&i| is_merged[i])
-            .flat_map(|i| {
-                (0..mesh_of(&scene.instances[i]).map_or(0, |m| m.triangle_count()))
-                    .map(move |p| (i as u32, p as u32))
-            })
-            .collect();
+        let is_merged = merge::merge_plan(scene, &moving);
+        let merged_at =
+            scene.instances.iter().zip(&is_merged).map(|(i, &m)| m.then_some(i.transform)).collect();
+        let merged_refs = merge::merged_refs(scene, &is_merged);
         let merged = Blas::build_from(
             merged_refs.len(),
-            |k| {
-                let (i, p) = merged_refs[k];
-                scene.meshes[scene.instances[i as usize].mesh as usize].triangle(p as usize)
-            },
+            |k| merge::world_triangle(scene, merged_refs[k].0, merged_refs[k].1),
             params,
             simd,
         );
@@ -359,7 +348,7 @@ impl SceneAccel {
             blas,
             merged,
             merged_refs,
-            is_merged,
+            merged_at,
             moving,
             tlas_build_cost: 0.0,
             instances: Vec::new(),
@@ -380,7 +369,7 @@ impl SceneAccel {
 
     /// Rebuilds only the top level from the instances' current transforms. When instances
     /// were added, removed or re-pointed at other meshes, or an instance merged at build
-    /// time (identity transform) moved, everything is rebuilt instead; after that rebuild
+    /// time (not told to move) moved, everything is rebuilt instead; after that rebuild
     /// the moved instance has its own entry and later moves are top-level only again.
     /// Mesh geometry is assumed unchanged since the build (deforming meshes need
     /// [`SceneAccel::build`]).
@@ -388,11 +377,7 @@ impl SceneAccel {
         let same_structure = scene.instances.len() == self.instances.len()
             && scene.meshes.len() == self.blas.len()
             && scene.instances.iter().zip(&self.instances).all(|(a, b)| a.mesh == b.mesh)
-            && scene
-                .instances
-                .iter()
-                .zip(&self.is_merged)
-                .all(|(a, &m)| !m || a.transform == Affine3A::IDENTITY);
+            && (0..scene.instances.len()).all(|i| !self.merged_moved(scene, i));
         if !same_structure {
             self.rebuild_all(scene);
             return;
@@ -423,17 +408,25 @@ impl SceneAccel {
         }
     }
 
-    /// True when instance `i` was merged into the identity instances' bottom level.
+    /// True when instance `i` was merged into world space at build time (it was not told
+    /// to move, [`SceneAccel::build_with_moving`]; see `merge.rs`).
     pub fn is_merged(&self, i: u32) -> bool {
-        self.is_merged.get(i as usize).copied().unwrap_or(false)
+        self.merged_at.get(i as usize).is_some_and(|m| m.is_some())
+    }
+
+    /// True when instance `i` of `scene` was merged and its transform is no longer the
+    /// one its world-space copy was made with.
+    pub(crate) fn merged_moved(&self, scene: &Scene, i: usize) -> bool {
+        let now = scene.instances.get(i).map(|inst| inst.transform);
+        self.merged_at.get(i).copied().flatten().is_some_and(|t| Some(t) != now)
     }
 
     fn build_top_level(&mut self, scene: &Scene) {
         self.instances = scene
             .instances
             .iter()
-            .zip(&self.is_merged)
-            .map(|(inst, &merged)| self.instance_record(inst, merged))
+            .zip(&self.merged_at)
+            .map(|(inst, merged)| self.instance_record(inst, merged.is_some()))
             .collect();
         self.triangle_count = scene
             .instances
@@ -639,7 +632,7 @@ impl SceneAccel {
         for (m, b) in self.blas.iter().enumerate() {
             b.validate().map_err(|e| format!("mesh {m}: {e}"))?;
         }
-        self.merged.validate().map_err(|e| format!("merged identity instances: {e}"))?;
+        self.merged.validate().map_err(|e| format!("merged instances: {e}"))?;
         self.validate_top_level()
     }
 

@@ -1,6 +1,6 @@
 //! Eight-ray packets through the top level: [`SceneAccel::intersect_packet`] and
-//! [`SceneAccel::occluded_packet`] on scenes of several objects (instances, moving or
-//! not, and the merged identity instances).
+//! [`SceneAccel::occluded_packet`] on scenes of several objects (the merged static
+//! instances and the moving ones, `merge.rs`).
 //!
 //! The packet walks the 4-wide top level once (8 rays x 1 instance box per instruction,
 //! each lane with the slab arithmetic of the single-ray top level, near-first by the

@@ -8,14 +8,18 @@
 
 use crate::wide::WideNode;
 use crate::{SceneAccel, TopLevelUpdate, MERGED, REBUILD_GROWTH};
-use filtrace_core::{Aabb, Affine3A};
+use filtrace_core::Aabb;
 use filtrace_scene::Scene;
 
 impl SceneAccel {
-    /// Everything rebuilt from `scene`, keeping the instances told to move apart.
+    /// Everything rebuilt from `scene`, keeping the instances told to move apart, and
+    /// those merged at build time that moved since (so that they move cheaply from now on).
     pub(crate) fn rebuild_all(&mut self, scene: &Scene) {
         let mut moving = std::mem::take(&mut self.moving);
         moving.resize(scene.instances.len(), false);
+        for (i, m) in moving.iter_mut().enumerate() {
+            *m |= self.merged_moved(scene, i);
+        }
         *self = Self::build_keeping_apart(scene, &self.params.clone(), self.simd, moving);
     }
 
@@ -33,8 +37,7 @@ impl SceneAccel {
             && scene.meshes.len() == self.blas.len()
             && moved.iter().all(|&i| {
                 scene.instances.get(i as usize).is_some_and(|inst| {
-                    inst.mesh == self.instances[i as usize].mesh
-                        && (!self.is_merged[i as usize] || inst.transform == Affine3A::IDENTITY)
+                    inst.mesh == self.instances[i as usize].mesh && !self.merged_moved(scene, i as usize)
                 })
             });
         if !same_structure {
@@ -43,7 +46,7 @@ impl SceneAccel {
         }
         let mut live_changed = false;
         for &i in moved {
-            let rec = self.instance_record(&scene.instances[i as usize], self.is_merged[i as usize]);
+            let rec = self.instance_record(&scene.instances[i as usize], self.is_merged(i));
             live_changed |= rec.bounds.is_empty() != self.instances[i as usize].bounds.is_empty();
             self.instances[i as usize] = rec;
         }

@@ -117,8 +117,14 @@ fn accels(scene: &Scene, params: &BuildParams) -> Vec<SceneAccel> {
     out
 }
 
+/// Brute force over the triangles the BVH of `scene` tests: merged instances in world
+/// space (which instances merge depends on the scene only, not on the build parameters).
+fn brute_like(scene: &Scene) -> BruteForce {
+    BruteForce::build_like(scene, &SceneAccel::build(scene))
+}
+
 fn check_scene(scene: &Scene, n: usize, seed: u64) {
-    let brute = BruteForce::build(scene);
+    let brute = brute_like(scene);
     for (preset, params) in BuildParams::presets() {
         for accel in accels(scene, &params) {
             let name = format!("{preset} {:?} ({} nodes)", accel.simd(), accel.stats().nodes);
@@ -331,7 +337,8 @@ fn merged_identity_instances_match_brute_force_and_survive_moves() {
     let mut accel = SceneAccel::build(&scene);
     scene.instances[5].transform = Affine3A::from_translation(Vec3::new(0.0, 0.0, 3.0));
     accel.update_transforms(&scene);
-    let brute = BruteForce::build(&scene);
+    assert!(!accel.is_merged(5) && accel.is_merged(6), "the moved instance is apart, the rest merged");
+    let brute = BruteForce::build_like(&scene, &accel);
     for ray in random_rays(&scene, 2000, 9) {
         check_ray(&accel, &brute, &ray).unwrap();
     }
@@ -347,7 +354,7 @@ fn gltf_engine_matches_brute_force() {
     let Some(path) = shared_path("scenes/gltf/2CylinderEngine.glb") else { return };
     let scene = filtrace_scene::load(&path).expect("engine loads");
     let accel = SceneAccel::build(&scene);
-    let brute = BruteForce::build(&scene);
+    let brute = BruteForce::build_like(&scene, &accel);
     let mut hits = 0;
     let rays = random_rays(&scene, 1500, 12);
     for ray in &rays {
@@ -419,7 +426,7 @@ fn ties_go_to_the_smallest_instance_and_prim() {
             scene.meshes.push(doubled(&base));
             let inst = Instance { mesh: 0, transform, material_override: None };
             scene.instances = vec![inst.clone(), inst];
-            let brute = BruteForce::build(&scene);
+            let brute = brute_like(&scene);
             // Rays from inside through every vertex and edge midpoint, and random rays.
             let mut rays = random_rays(&scene, 400, 31);
             let c = transform.transform_point3(Vec3::new(0.1, -0.2, 0.3));

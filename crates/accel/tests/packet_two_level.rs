@@ -1,8 +1,9 @@
 //! Eight-ray packets through the top level (scenes of many instances): lane by lane and
 //! bit for bit equal to the single-ray queries, and to brute force, on scenes of random
-//! instances (flat and BVH meshes, shared meshes, merged identity instances, moving
+//! instances (flat and BVH meshes, shared meshes, merged static instances, moving
 //! instances after `update_instances`), for coherent packets (camera tiles), incoherent
-//! ones and shadow segments, with random partial masks; both kernels.
+//! ones and shadow segments, with random partial masks; both kernels. Brute force is
+//! [`BruteForce::build_like`]: merged instances tested in world space, as the BVH does.
 
 use filtrace_accel::testmesh::{self, SplitMix64};
 use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, TopLevelUpdate, LANES};
@@ -32,8 +33,7 @@ fn random_transform(rng: &mut SplitMix64, spread: f32) -> Affine3A {
 }
 
 /// `n` instances of four meshes (two flat: a cube of 12 triangles and one of 48; two with
-/// a BVH), randomly placed, every fifth one with the identity transform (merged into one
-/// bottom level when there are two or more).
+/// a BVH), randomly placed, every fifth one with the identity transform.
 fn random_scene(n: usize, seed: u64) -> Scene {
     let mut rng = SplitMix64(seed);
     let mut s = Scene::default();
@@ -124,8 +124,16 @@ fn check(accel: &SceneAccel, brute: Option<&BruteForce>, rays: &RayPacket, activ
     (hits.mask.count_ones(), occ.count_ones())
 }
 
+/// The transformed instances of `scene`: told to move, they keep their own top-level
+/// entries (the identity ones are merged), so that packets walk the top level.
+fn transformed(scene: &Scene) -> Vec<u32> {
+    (0..scene.instances.len() as u32)
+        .filter(|&i| scene.instances[i as usize].transform != Affine3A::IDENTITY)
+        .collect()
+}
+
 fn check_all(accel: &SceneAccel, scene: &Scene, n: usize, seed: u64) {
-    let brute = BruteForce::build(scene);
+    let brute = BruteForce::build_like(scene, accel);
     let (mut hit, mut occluded) = (0, 0);
     for (k, (p, active)) in packets(scene, n, seed).iter().enumerate() {
         let (h, o) = check(accel, (k % 4 == 0).then_some(&brute), p, *active);
@@ -140,8 +148,12 @@ fn many_instances_packets_equal_single_rays_and_brute_force() {
     for (n, seed) in [(3, 1), (12, 2), (60, 3)] {
         let scene = random_scene(n, seed);
         for simd in kernels() {
-            let accel = SceneAccel::build_simd(&scene, &BuildParams::default(), simd);
-            check_all(&accel, &scene, 900, seed);
+            // Static: every instance merged into one world-space bottom level; moving: the
+            // transformed ones walked through the top level.
+            for moving in [vec![], transformed(&scene)] {
+                let accel = SceneAccel::build_with_moving(&scene, &BuildParams::default(), simd, &moving);
+                check_all(&accel, &scene, 900, seed);
+            }
         }
     }
 }
@@ -179,7 +191,8 @@ fn moving_instances_packets_equal_single_rays_after_updates() {
 fn sparse_masks_and_invalid_lanes_through_the_top_level() {
     let scene = random_scene(16, 5);
     for simd in kernels() {
-        let accel = SceneAccel::build_simd(&scene, &BuildParams::default(), simd);
+        let accel =
+            SceneAccel::build_with_moving(&scene, &BuildParams::default(), simd, &transformed(&scene));
         let mut rng = SplitMix64(3);
         for (mut p, _) in packets(&scene, 600, 11) {
             p.dir[1][2] = f32::NAN;

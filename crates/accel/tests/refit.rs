@@ -55,7 +55,7 @@ fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
 
 fn check(accel: &SceneAccel, scene: &Scene, rays: &[Ray], what: &str) {
     accel.validate().unwrap_or_else(|e| panic!("{what}: {e}"));
-    let brute = BruteForce::build(scene);
+    let brute = BruteForce::build_like(scene, accel);
     let mut hits = 0;
     for ray in rays {
         let b = brute.intersect(ray);
@@ -100,12 +100,14 @@ fn refits_and_rebuilds_agree_with_brute_force_over_random_moves() {
     }
 }
 
-/// A merged (identity) instance that moves costs a full rebuild, after which it is apart
-/// and later moves are top-level only; an instance made singular leaves the top level.
+/// A merged instance (built as static: identity or not) that moves costs a full rebuild,
+/// after which it is apart and later moves are top-level only; an instance made singular
+/// leaves the top level.
 #[test]
 fn merged_and_singular_instances_fall_back_to_rebuilds() {
     let mut scene = scene();
     let mut accel = SceneAccel::build(&scene);
+    assert!((0..2 + MOVERS).all(|i| accel.is_merged(i)), "a static scene merges whole");
     let mut rng = SplitMix64(3);
     assert_eq!(accel.update_instances(&scene, &[]), TopLevelUpdate::Unchanged);
     scene.instances[1].transform = Affine3A::from_translation(Vec3::new(0.0, 3.0, 1.0));
@@ -116,7 +118,8 @@ fn merged_and_singular_instances_fall_back_to_rebuilds() {
     assert_eq!(accel.update_instances(&scene, &[1]), TopLevelUpdate::Refit);
     check(&accel, &scene, &random_rays(&mut rng, 300), "after it moved again");
     scene.instances[3].transform = Affine3A::from_scale(Vec3::ZERO);
-    assert_eq!(accel.update_instances(&scene, &[3]), TopLevelUpdate::Rebuilt);
+    assert_eq!(accel.update_instances(&scene, &[3]), TopLevelUpdate::Full, "3 was merged");
+    assert!(!accel.is_merged(3) && accel.is_merged(4));
     check(&accel, &scene, &random_rays(&mut rng, 300), "after an instance became singular");
     scene.instances[3].transform = Affine3A::IDENTITY;
     assert_eq!(accel.update_instances(&scene, &[3]), TopLevelUpdate::Rebuilt);

@@ -68,6 +68,15 @@ struct InstanceRecord {
     has_uvs: bool,
 }
 
+/// An instance's vertex data as [`SceneGeometry::vertex_attributes`] gives it.
+pub(crate) struct VertexAttributes<'s> {
+    pub(crate) mesh: &'s filtrace_scene::Mesh,
+    /// Inverse transpose of the instance's linear part.
+    pub(crate) normal_xf: &'s Mat3A,
+    pub(crate) has_normals: bool,
+    pub(crate) has_uvs: bool,
+}
+
 /// Per-triangle data of [`SceneGeometry`]; `repr(C)`: the lockstep integrator reads the
 /// records as rows of [`TRI_FLOATS`] 32-bit words ([`SceneGeometry::tri_words`]).
 #[derive(Clone, Copy, Debug)]
@@ -169,17 +178,27 @@ impl SceneGeometry {
         &self.tris[(self.instances[instance as usize].first_tri + prim) as usize]
     }
 
-    /// For triangle `prim` of instance `instance` when its mesh has neither vertex normals
-    /// nor uvs: the row of its record in [`Self::tri_words`] (the lockstep integrator's
-    /// vector `from_hit`, which reads the material from the row; other hits go through
-    /// [`SurfaceInteraction::from_hit`]).
+    /// Row of the record of triangle `prim` of instance `instance` in [`Self::tri_words`]
+    /// (the lockstep integrator's vector `from_hit`) and whether the instance's mesh has
+    /// vertex normals or uvs ([`Self::vertex_attributes`]).
     #[inline]
-    pub(crate) fn plain_row(&self, instance: u32, prim: u32) -> Option<usize> {
+    pub(crate) fn row(&self, instance: u32, prim: u32) -> (usize, bool) {
         let inst = &self.instances[instance as usize];
-        if inst.has_normals || inst.has_uvs {
-            return None;
+        ((inst.first_tri + prim) as usize, inst.has_normals || inst.has_uvs)
+    }
+
+    /// What [`SurfaceInteraction::from_hit`] reads to interpolate the vertex attributes of
+    /// a hit on instance `instance` of `scene`: its mesh, normal transform, and whether the
+    /// mesh has vertex normals and uvs.
+    #[inline]
+    pub(crate) fn vertex_attributes<'s>(&'s self, scene: &'s Scene, instance: u32) -> VertexAttributes<'s> {
+        let inst = &self.instances[instance as usize];
+        VertexAttributes {
+            mesh: &scene.meshes[scene.instances[instance as usize].mesh as usize],
+            normal_xf: &inst.normal_xf,
+            has_normals: inst.has_normals,
+            has_uvs: inst.has_uvs,
         }
-        Some((inst.first_tri + prim) as usize)
     }
 
     /// The triangle records as rows of [`TRI_FLOATS`] words (the material as its bits).

@@ -11,15 +11,16 @@
 //! scenes with at most eight lights, else per lane; area lights sampled in lanes, one packet
 //! of shadow rays, BSDF value and density in lanes for diffuse surfaces), BSDF sampling
 //! (cosine hemisphere in lanes for diffuse surfaces), Russian roulette, and one packet of
-//! closest-hit queries followed by the hit records (`from_hit` in lanes for meshes without
-//! vertex attributes: the triangle records are loaded as rows and transposed). Material
+//! closest-hit queries followed by the hit records (`from_hit` in lanes: the triangle
+//! records are loaded as rows and transposed, vertex normals gathered per lane and
+//! interpolated in lanes). Material
 //! flags and Lambert reflectances are table lookups in lanes for scenes with at most eight
 //! materials.
 //!
 //! **Exactness is the contract.** Every lane performs the operations of
 //! [`super::path::li`] / [`super::path::trace_from_hit`] in the same order (see
 //! [`super::lanes`]), and what is not worth a lane version (glossy BSDFs, point, spot,
-//! directional and environment lights, emission, misses, meshes with normals or uvs) calls
+//! directional and environment lights, emission, misses, uv interpolation) calls
 //! the scalar code for that lane. The film is therefore bit-identical to the scalar
 //! renderer's (colour, variance and every AOV), which `tests/lockstep.rs` checks on every
 //! built-in scene and on a TOML scene with every material, light type and a texture.

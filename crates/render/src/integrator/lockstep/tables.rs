@@ -55,13 +55,22 @@ pub(crate) struct SmallLights {
     pub(crate) field: [[f32; 8]; AREA_FLOATS],
 }
 
+/// Per instance of a scene with at most eight of them (lane `i` = instance `i`): the row
+/// of its first triangle in [`SceneGeometry::tri_words`] (triangle `prim` is row
+/// `first[i] + prim`, as [`SceneGeometry::row`] gives it) and `u32::MAX` when its mesh
+/// has vertex normals or uvs, else 0.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct InstanceRows {
+    pub(crate) first: [u32; 8],
+    pub(crate) attributes: [u32; 8],
+}
+
 /// Everything the lockstep tracer looks up in tables (see the module docs).
 #[derive(Clone, Debug, Default)]
 pub struct LockstepTables {
     small_materials: Option<Box<SmallMaterials>>,
-    /// For scenes of at most eight instances, none with vertex normals or uvs: each
-    /// instance's first row in [`SceneGeometry::tri_words`] (lane `i` = instance `i`).
-    plain_first_tris: Option<[u32; 8]>,
+    /// [`InstanceRows`] of scenes of at most eight instances.
+    first_tris: Option<InstanceRows>,
     /// Per light [`AREA_FLOATS`] words: the values of [`LightSet::area_light`].
     area_words: Vec<f32>,
     small_lights: Option<Box<SmallLights>>,
@@ -72,7 +81,7 @@ impl LockstepTables {
     pub fn new(scene: &Scene, geometry: &SceneGeometry, lights: &LightSet) -> Self {
         let mut t = LockstepTables {
             small_materials: small_materials(scene, geometry).map(Box::new),
-            plain_first_tris: plain_first_tris(scene, geometry),
+            first_tris: first_tris(scene, geometry),
             ..Default::default()
         };
         t.update_lights(lights);
@@ -105,12 +114,10 @@ impl LockstepTables {
         self.small_materials.as_deref()
     }
 
-    /// For scenes of at most eight instances without vertex normals and uvs: the first
-    /// row of each instance's triangles in [`SceneGeometry::tri_words`] (triangle `prim` of
-    /// instance `i` is row `first[i] + prim`, as in [`SceneGeometry::plain_row`]).
+    /// [`InstanceRows`] of scenes of at most eight instances.
     #[inline]
-    pub(crate) fn plain_first_tris(&self) -> Option<&[u32; 8]> {
-        self.plain_first_tris.as_ref()
+    pub(crate) fn first_tris(&self) -> Option<&InstanceRows> {
+        self.first_tris.as_ref()
     }
 
     /// The area lights as rows of [`AREA_FLOATS`] words (row `i` = light `i`).
@@ -126,16 +133,18 @@ impl LockstepTables {
     }
 }
 
-fn plain_first_tris(scene: &Scene, geometry: &SceneGeometry) -> Option<[u32; 8]> {
+fn first_tris(scene: &Scene, geometry: &SceneGeometry) -> Option<InstanceRows> {
     let n = scene.instances.len();
     if n > 8 {
         return None;
     }
-    let mut first = [0u32; 8];
-    for (i, f) in first.iter_mut().enumerate().take(n) {
-        *f = geometry.plain_row(i as u32, 0)? as u32;
+    let mut t = InstanceRows::default();
+    for i in 0..n {
+        let (row, attributes) = geometry.row(i as u32, 0);
+        t.first[i] = row as u32;
+        t.attributes[i] = if attributes { u32::MAX } else { 0 };
     }
-    Some(first)
+    Some(t)
 }
 
 fn small_materials(scene: &Scene, geometry: &SceneGeometry) -> Option<SmallMaterials> {

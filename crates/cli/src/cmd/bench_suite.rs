@@ -20,7 +20,7 @@ mod scene_dump;
 
 use super::render::{parse_resolution, Resolution};
 use anyhow::Context;
-use filtrace_accel::bench::{process_cpu_seconds, ray_bench, RayBenchOptions, RayBenchReport};
+use filtrace_accel::bench::{ray_bench, RayBenchOptions, RayBenchReport};
 use filtrace_render::{render_bench, RenderSettings, Renderer};
 use filtrace_scene::builtin::{grass_with, shared_candidates, GrassParams};
 use filtrace_scene::Scene;
@@ -234,13 +234,27 @@ fn thread_counts(requested: &[usize]) -> Vec<usize> {
     }
 }
 
+/// CPU time of the whole process, threads that have exited included, from the `utime` and
+/// `stime` fields of `/proc/self/stat` (in the kernel's fixed 100 Hz `USER_HZ` ticks; Linux
+/// only). `render_bench` runs on a pool of its own that is gone when it returns, which
+/// `process_cpu_seconds` (live threads only) would not count. 10 ms ticks are fine for
+/// renders of seconds.
+fn cpu_seconds_with_exited_threads() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name, which may contain spaces.
+    let mut rest = stat.get(stat.rfind(')')? + 1..)?.split_whitespace();
+    let utime: u64 = rest.nth(11)?.parse().ok()?;
+    let stime: u64 = rest.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
+}
+
 /// `repeats` full renders on `threads` threads.
 fn measure_render(renderer: &Renderer, threads: usize, repeats: usize) -> RenderRow {
     let (mut seconds, mut best_cpu, mut last) = (Vec::new(), None::<f64>, None);
     for _ in 0..repeats {
-        let cpu0 = process_cpu_seconds();
+        let cpu0 = cpu_seconds_with_exited_threads();
         let r = render_bench(renderer, threads);
-        if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
+        if let (Some(a), Some(b)) = (cpu0, cpu_seconds_with_exited_threads()) {
             best_cpu = Some(best_cpu.map_or(b - a, |c| c.min(b - a)));
         }
         seconds.push(r.seconds);

@@ -180,7 +180,8 @@ mod tests {
             .iter()
             .map(|r| {
                 let nb = previous.neighbours(r.point.position, r.point.normal);
-                match nb.iter().next() {
+                let nearest = nb.iter().next();
+                match nearest {
                     Some((l, _)) if nb.closest_distance() == Some(0.0) => old[l],
                     _ => RecordParams::blend(nb.iter().map(|(l, w)| (&old[l], w))),
                 }

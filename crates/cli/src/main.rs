@@ -53,6 +53,10 @@ fn main() {
         if e.downcast_ref::<cmd::render::Interrupted>().is_some() {
             std::process::exit(130);
         }
+        // Options that parse but do not combine: a usage error, as clap's own (exit code 2).
+        if let Some(usage) = e.downcast_ref::<clap::Error>() {
+            usage.exit();
+        }
         eprintln!("error: {}", error_chain(&e));
         std::process::exit(1);
     }

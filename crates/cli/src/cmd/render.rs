@@ -4,8 +4,12 @@
 //! The command reads top down through its modules, each importing only those below it:
 //! `render_args` (the options), `render_session` (Ctrl-C, test hook, progress),
 //! `render_output` (the EXR + PNG writer), then the renders: `render_plain` (path tracing in
-//! progressive passes), `render_filtered` (the filtered pipeline and adaptive sampling) and
-//! `sequence` (frames of an animation, with either).
+//! progressive passes), `render_filtered` (the filtered pipeline and adaptive sampling),
+//! `render_vpl` (the many-light renderer) and `sequence` (frames of an animation, with any
+//! of them).
+//!
+//! Options that parse but do not combine (`--filter` with `--integrator vpl`, ...) are a
+//! usage error, exit code 2 as clap's own, found before anything is loaded.
 
 pub use super::render_args::{parse_resolution, CommonArgs, Resolution};
 use super::render_filtered::{AdaptiveArgs, FilterArgs};
@@ -28,18 +32,64 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    args.check_combinations()?;
+    if args.sequence.is_sequence() {
+        return super::sequence::run(&args.common, &args.filter, &args.adaptive, &args.vpl, &args.sequence);
+    }
+    args.sequence.check_still()?;
     if args.vpl.enabled() {
         return super::render_vpl::run(&args.common, &args.vpl);
     }
-    if args.sequence.is_sequence() {
-        return super::sequence::run(&args.common, &args.filter, &args.adaptive, &args.sequence);
-    }
-    args.sequence.check_still()?;
     // The filtered pipeline (and adaptive sampling, which drives it).
     if args.filter.enabled() || args.adaptive.adaptive {
         return super::render_filtered::run(&args.common, &args.filter, &args.adaptive);
     }
     super::render_plain::run(&args.common)
+}
+
+impl Args {
+    /// Refuses options that parse but do not combine, naming them (a `clap::Error`, which
+    /// `main` turns into exit code 2).
+    fn check_combinations(&self) -> Result<(), clap::Error> {
+        let conflicts: Vec<(bool, &str, &str)> = if self.vpl.enabled() {
+            vec![
+                (
+                    self.filter.enabled(),
+                    "the argument '--filter' cannot be used with '--integrator vpl'",
+                    "the many-light renderer has no filtered pipeline; denoise its EXR with `filtrace denoise`",
+                ),
+                (
+                    self.adaptive.adaptive,
+                    "the argument '--adaptive' cannot be used with '--integrator vpl'",
+                    "adaptive sampling drives the filtered pipeline",
+                ),
+                (
+                    self.common.trace.is_some(),
+                    "the argument '--trace' cannot be used with '--integrator vpl'",
+                    "it chooses how the path tracer walks its paths; the VPL integrator has one way",
+                ),
+            ]
+        } else {
+            vec![
+                (
+                    self.vpl.ground_truth,
+                    "the argument '--ground-truth' needs '--integrator vpl'",
+                    "it is the exhaustive sum over the VPLs",
+                ),
+                (
+                    self.vpl.vpl_clamp.is_some(),
+                    "the argument '--vpl-clamp' needs '--integrator vpl'",
+                    "it bounds the VPLs' geometry term",
+                ),
+            ]
+        };
+        match conflicts.iter().find(|(given, ..)| *given) {
+            Some((_, what, why)) => {
+                Err(clap::Error::raw(clap::error::ErrorKind::ArgumentConflict, format!("{what}: {why}\n")))
+            }
+            None => Ok(()),
+        }
+    }
 }
 
 #[cfg(test)]

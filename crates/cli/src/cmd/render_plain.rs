@@ -207,7 +207,7 @@ pub fn cancelled_note(s: &Summary) -> String {
 
 /// The progressive passes ([`progressive_passes`]) of `c` until done or `cancel`, counted
 /// on `bar` (its length set here); returns the film and the seconds spent.
-fn render_passes(
+pub fn render_passes(
     renderer: &Renderer,
     pool: &rayon::ThreadPool,
     c: &CommonArgs,

@@ -2,24 +2,31 @@
 //! importance caching) as the renderer's integrator, in the path tracer's progressive
 //! passes (`--pass-spp`; the `optimized` sampler learns after each), with its Ctrl-C
 //! behaviour: a render stopped once every pixel has a sample writes what it has (each
-//! pixel a prefix of its samples) and exits with 130. Writes the usual EXR (colour and the G-buffer AOVs, so the filters
-//! can run on it) plus a `cache_distance` layer (d-distance of each pixel's surface to the
-//! closest cache point, the thesis's Figure 27) and the PNG; prints a summary with the
-//! milliseconds per stage.
+//! pixel a prefix of its samples) and exits with 130. Writes the usual EXR (colour, the
+//! G-buffer AOVs, so the filters can run on it, and the motion layers) plus a
+//! `cache_distance` layer (d-distance of each pixel's surface to the closest cache point,
+//! the thesis's Figure 27) and the PNG; prints a summary with the milliseconds per stage.
+//!
+//! [`VplRun`] renders one frame; `sequence` uses it for `--frames` with one integrator
+//! carried from frame to frame, so that the `optimized` parameters carry over.
 
 use super::render_args::CommonArgs;
 use super::render_output::{render_attributes, write_outputs, Written};
+use super::render_plain::render_passes;
 use super::render_session::{progress_bar, test_hook, CtrlC, Interrupted};
 use anyhow::Context;
-use filtrace_render::renderer::progressive_passes;
+use filtrace_core::Image;
 use filtrace_render::Renderer;
 use filtrace_vpl::cache::{CacheParams, SamplerKind};
+use filtrace_vpl::vpls::seam::frame_memory;
 use filtrace_vpl::vpls::{
-    collect_frame, use_vpl_integrator, GeometryBound, VplFrame, VplIntegrator, VplParams, VplSettings,
+    collect_frame, frame_vpl_seed, use_vpl_integrator, GeometryBound, VplFrame, VplIntegrator, VplParams,
+    VplReport, VplSettings,
 };
+use serde::Serialize;
 use std::io::Write;
-use std::sync::atomic::Ordering;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `--integrator` values.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -84,11 +91,178 @@ impl VplArgs {
         s.cache.validate().map_err(|e| anyhow::anyhow!("--cache-points/--cache-neighbours: {e}"))?;
         Ok(s)
     }
+
+    /// Everything but the frame that decides a frame's pixels, for a sequence's header:
+    /// the pass size too, since `optimized` learns after each pass.
+    pub fn stamp(&self, pass_spp: u32) -> String {
+        let sampler = if self.ground_truth { "exhaustive" } else { self.vpl_sampler.name() };
+        format!(
+            "vpl sampler={sampler} vpls={} cache_points={} neighbours={} clamp={:?} passes_spp={pass_spp}",
+            self.vpls, self.cache_points, self.cache_neighbours, self.vpl_clamp
+        )
+    }
+
+    /// Refuses a frame whose film, outputs and integrator buffers ([`frame_memory`]) do
+    /// not fit in memory: called before the scene is loaded.
+    pub fn check_memory(&self, c: &CommonArgs) -> anyhow::Result<()> {
+        let s = c.settings()?;
+        // The scene's radius only scales --vpl-clamp, which costs no memory.
+        let vs = self.settings(1.0)?;
+        let vpl = frame_memory(s.width, s.height, &vs, c.thread_count(), c.pass_spp());
+        let needs = filtrace_render::memory::plain_render(s.width, s.height).with_all(&vpl);
+        let needs = needs.with_hint(
+            "Lower --res, --vpls or --cache-points (the cache holds three distributions over the \
+             VPLs per cache point); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit",
+        );
+        filtrace_render::memory::check(&needs).map_err(anyhow::Error::msg)
+    }
+}
+
+/// What stays the same from frame to frame of a VPL render; the integrator itself lives
+/// in the renderer, set once and prepared by every frame update.
+pub struct VplRun<'a> {
+    pub c: &'a CommonArgs,
+    pub settings: VplSettings,
+    pub pool: &'a rayon::ThreadPool,
+    pub cancel: &'a AtomicBool,
+}
+
+/// The JSON summary of one VPL frame (`--json`).
+#[derive(Serialize)]
+pub struct Summary {
+    scene: String,
+    res: String,
+    spp: u32,
+    spp_done: u32,
+    spp_max: u32,
+    seed: u64,
+    /// The seed the frame's VPLs were drawn with ([`frame_vpl_seed`]).
+    vpl_seed: u64,
+    threads: usize,
+    integrator: &'static str,
+    sampler: &'static str,
+    vpls: usize,
+    light_paths: usize,
+    cache_records: usize,
+    vpl_generation_ms: f64,
+    cache_ms: f64,
+    shading_ms: f64,
+    optimisation_ms: f64,
+    /// `optimized`: passes the optimiser learnt from in this frame, and the records its
+    /// last step moved.
+    optimised_passes: u32,
+    records_stepped: usize,
+    mean_rgb: [f64; 3],
+    output: PathBuf,
+    png: PathBuf,
+    nonfinite_samples: u64,
+    pub cancelled: bool,
+}
+
+impl Summary {
+    /// Milliseconds per stage, for the human line.
+    pub fn stages(&self) -> String {
+        format!(
+            "VPLs {:.1} ms, cache {:.1} ms, shading {:.1} ms, optimisation {:.1} ms",
+            self.vpl_generation_ms, self.cache_ms, self.shading_ms, self.optimisation_ms
+        )
+    }
+}
+
+impl VplRun<'_> {
+    /// Brings `renderer` to render `frame` with the VPL integrator: a still scene, which
+    /// the sequence does not move, is moved to the frame number here so that its VPLs
+    /// follow it too ([`frame_vpl_seed`]); the integrator is set the first time (which
+    /// prepares it) and then kept, so every later frame update prepares the same one and
+    /// the `optimized` parameters carry over (thesis 5.2.2).
+    pub fn prepare(&self, renderer: &mut Renderer, frame: i64) -> anyhow::Result<()> {
+        if renderer.frame().index != frame {
+            self.pool.install(|| renderer.prepare_frame(frame)).with_context(|| format!("frame {frame}"))?;
+        }
+        if renderer.integrator_as::<VplIntegrator>().is_none() {
+            self.pool.install(|| use_vpl_integrator(renderer, &self.settings)).map_err(anyhow::Error::msg)?;
+        }
+        Ok(())
+    }
+
+    /// Renders the prepared frame in progressive passes and writes it to `out` (header:
+    /// the render's attributes, then `stamp`), the samples counted on `bar`. `None` when
+    /// Ctrl-C stopped it before every pixel had a sample: then nothing is written.
+    pub fn render_frame(
+        &self,
+        renderer: &Renderer,
+        out: &Path,
+        stamp: &[(&str, String)],
+        bar: &indicatif::ProgressBar,
+    ) -> anyhow::Result<Option<Summary>> {
+        let integrator = renderer
+            .integrator_as::<VplIntegrator>()
+            .context("the VPL integrator was not set (VplRun::prepare)")?;
+        let (film, render_s) = render_passes(renderer, self.pool, self.c, self.cancel, bar);
+        let cancelled = self.cancel.load(Ordering::SeqCst);
+        if cancelled && film.pixels_without_samples() > 0 {
+            return Ok(None);
+        }
+        let frame = self.pool.install(|| collect_frame(film, integrator, render_s * 1e3, cancelled));
+        let written = write_frame(self.c, out, renderer, &frame, stamp)?;
+        Ok(Some(self.summary(renderer, &frame, &integrator.report(), written)))
+    }
+
+    fn summary(
+        &self,
+        renderer: &Renderer,
+        frame: &VplFrame,
+        report: &VplReport,
+        written: Written,
+    ) -> Summary {
+        let settings = renderer.settings();
+        let mean = frame.film.aovs().color.mean();
+        let t = frame.times;
+        let vs = &self.settings;
+        Summary {
+            scene: self.c.scene.clone(),
+            res: self.c.res.to_string(),
+            spp: settings.spp,
+            spp_done: frame.film.min_samples(),
+            spp_max: frame.film.max_samples(),
+            seed: settings.seed,
+            vpl_seed: frame_vpl_seed(vs.vpls.seed, settings.seed, renderer.frame().index),
+            threads: self.pool.current_num_threads(),
+            integrator: "vpl",
+            sampler: if vs.ground_truth { "exhaustive" } else { vs.sampler.name() },
+            vpls: frame.vpls.len(),
+            light_paths: frame.vpls.light_paths,
+            cache_records: frame.cache_records,
+            vpl_generation_ms: t.vpl_generation_ms,
+            cache_ms: t.cache_ms,
+            shading_ms: t.shading_ms,
+            optimisation_ms: t.optimisation_ms,
+            optimised_passes: report.optimised_passes,
+            records_stepped: report.last_step.stepped,
+            mean_rgb: [mean[0], mean[1], mean[2]],
+            output: written.exr,
+            png: written.png,
+            nonfinite_samples: frame.film.dropped_samples(),
+            cancelled: frame.cancelled,
+        }
+    }
+}
+
+/// What a frame cut short by Ctrl-C holds.
+pub fn cancelled_note(s: &Summary) -> String {
+    format!(
+        "cancelled: wrote what was rendered ({} to {} of {} spp per pixel; per pixel in the 'samples' layer) to {}",
+        s.spp_done,
+        s.spp_max,
+        s.spp,
+        s.output.display()
+    )
 }
 
 /// Renders `c.scene` with the VPL integrator in progressive passes and writes the outputs.
 pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     let settings = c.settings()?;
+    v.check_memory(c)?;
     // Until the passes start, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
     let scene = c.load_scene().with_context(|| format!("cannot load scene '{}'", c.scene))?;
@@ -98,91 +272,68 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     let mut renderer =
         pool.install(|| Renderer::new(scene, settings.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
     let vs = v.settings(renderer.lights().scene_radius())?;
+    let run = VplRun { c, settings: vs, pool: &pool, cancel: ctrlc.flag() };
     // The integrator's `prepare`: VPLs, G-buffer and importance cache of the frame.
-    pool.install(|| use_vpl_integrator(&mut renderer, &vs)).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let frame = renderer.frame().index;
+    run.prepare(&mut renderer, frame)?;
     test_hook("built", ctrlc.flag());
     ctrlc.arm();
     test_hook("rendering", ctrlc.flag());
-    let cancel = ctrlc.flag();
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {} (vpl)", c.scene_name()));
-    let mut film = renderer.new_film();
-    let start = Instant::now();
-    for (first, count) in progressive_passes(settings.spp, c.pass_spp()) {
-        let on_tile = |n: usize| bar.inc(n as u64 * count as u64);
-        if cancel.load(Ordering::SeqCst)
-            || !pool.install(|| renderer.render_pass_with_progress(&mut film, first, count, cancel, &on_tile))
-        {
-            break;
-        }
-        test_hook(&format!("pass {}", first + count), cancel);
-    }
-    bar.finish_and_clear();
-    let cancelled = ctrlc.is_set();
-    if cancelled && film.pixels_without_samples() > 0 {
+    let Some(summary) = run.render_frame(&renderer, &out, &[], &bar)? else {
         eprintln!(
             "cancelled before every pixel had a sample: nothing written ({} left as it was)",
             out.display()
         );
         return Err(Interrupted.into());
-    }
-    let integrator = renderer.integrator_as::<VplIntegrator>().expect("the VPL integrator was set");
-    let frame =
-        pool.install(|| collect_frame(film, integrator, start.elapsed().as_secs_f64() * 1e3, cancelled));
-    let written = write_frame(c, &out, &frame, settings.spp)?;
-    print_summary(c, &vs, &frame, &written, settings.spp)?;
-    if cancelled {
-        eprintln!(
-            "cancelled: wrote what was rendered ({} to {} of {} spp per pixel) to {}",
-            frame.film.min_samples(),
-            frame.film.max_samples(),
-            settings.spp,
-            written.exr.display()
-        );
+    };
+    print_summary(c, &summary)?;
+    if summary.cancelled {
+        eprintln!("{}", cancelled_note(&summary));
         return Err(Interrupted.into());
     }
     Ok(())
 }
 
-/// The EXR (colour, AOVs, per-pixel sample counts, cache distance) and the PNG.
-fn write_frame(c: &CommonArgs, out: &std::path::Path, frame: &VplFrame, spp: u32) -> anyhow::Result<Written> {
+/// The EXR (colour, AOVs, per-pixel sample counts, cache distance, motion) and the PNG.
+fn write_frame(
+    c: &CommonArgs,
+    out: &Path,
+    renderer: &Renderer,
+    frame: &VplFrame,
+    stamp: &[(&str, String)],
+) -> anyhow::Result<Written> {
     let aovs = frame.film.try_aovs()?;
     let counts = frame.film.sample_counts();
-    let attributes = render_attributes(spp, frame.film.min_samples(), frame.cancelled);
-    let extra: [(&str, &[&str], &filtrace_core::Image); 2] =
-        [("samples", &["Y"], &counts), ("cache_distance", &["Y"], &frame.cache_distance)];
+    let mut attributes =
+        render_attributes(renderer.settings().spp, frame.film.min_samples(), frame.cancelled);
+    attributes.extend(stamp.iter().cloned());
+    let motion = renderer.motion_aov();
+    let extra: Vec<(&str, &[&str], &Image)> =
+        [("samples", &["Y"][..], &counts), ("cache_distance", &["Y"][..], &frame.cache_distance)]
+            .into_iter()
+            .chain(motion.layers())
+            .collect();
     write_outputs(out, &aovs, &extra, &attributes, None, &c.tonemap())
 }
 
 /// The JSON object (`--json`) or the line of text.
-fn print_summary(
-    c: &CommonArgs,
-    vs: &VplSettings,
-    frame: &VplFrame,
-    written: &Written,
-    spp: u32,
-) -> anyhow::Result<()> {
-    let mean = frame.film.aovs().color.mean();
-    let t = frame.times;
-    let sampler = if vs.ground_truth { "exhaustive" } else { vs.sampler.name() };
-    let summary = serde_json::json!({
-        "scene": c.scene, "res": c.res.to_string(), "spp": spp, "spp_done": frame.film.min_samples(),
-        "seed": c.settings()?.seed, "integrator": "vpl", "sampler": sampler, "vpls": frame.vpls.len(),
-        "light_paths": frame.vpls.light_paths, "cache_records": frame.cache_records,
-        "vpl_generation_ms": t.vpl_generation_ms, "cache_ms": t.cache_ms,
-        "shading_ms": t.shading_ms, "optimisation_ms": t.optimisation_ms,
-        "mean_rgb": [mean[0], mean[1], mean[2]], "output": written.exr, "png": written.png,
-        "nonfinite_samples": frame.film.dropped_samples(), "cancelled": frame.cancelled,
-    });
+fn print_summary(c: &CommonArgs, s: &Summary) -> anyhow::Result<()> {
     let mut o = super::output::stdout();
     if c.json {
-        writeln!(o, "{summary}")?;
+        writeln!(o, "{}", serde_json::to_string(s)?)?;
     } else {
         writeln!(
             o,
-            "rendered {} with {} VPLs ({sampler}, {} cache records) at {} spp: VPLs {:.1} ms, cache {:.1} ms, shading {:.1} ms, optimisation {:.1} ms\nwrote {}",
-            c.scene, frame.vpls.len(), frame.cache_records, frame.film.min_samples(),
-            t.vpl_generation_ms, t.cache_ms, t.shading_ms, t.optimisation_ms, written.exr.display()
+            "rendered {} with {} VPLs ({}, {} cache records) at {} spp: {}\nwrote {}",
+            s.scene,
+            s.vpls,
+            s.sampler,
+            s.cache_records,
+            s.spp_done,
+            s.stages(),
+            s.output.display()
         )?;
     }
     Ok(())

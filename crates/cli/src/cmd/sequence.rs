@@ -6,6 +6,13 @@
 //! with the same seed, so that a still scene gives the still render at every frame. The
 //! world moves between frames through [`FrameSource`], the one per-frame step.
 //!
+//! `--integrator vpl` renders each frame with the many-light renderer (`render_vpl`), one
+//! integrator carried from frame to frame: its VPLs are drawn anew each frame (their seed
+//! follows the frame number, still scenes included) and the `optimized` sampler starts each
+//! frame from the parameters the frame before learnt, interpolated at the new cache
+//! records (thesis 5.2.2), so a frame of a sequence differs from the same frame rendered
+//! alone for `optimized` (equal for the other samplers).
+//!
 //! Ctrl-C before the first frame starts writes nothing (as a still render). During a frame,
 //! that frame follows the still render's rules (written if complete enough, its header
 //! saying it was cut short); every finished frame stays, the preview shows the frames on
@@ -24,6 +31,7 @@ use super::render_args::CommonArgs;
 use super::render_filtered::{build_pipeline_traced, AdaptiveArgs, FilterArgs, FilteredRun, Pipeline};
 use super::render_plain::{build_renderer, LoadReport, PlainRun};
 use super::render_session::{check_memory, multi_progress, progress_bar, test_hook, CtrlC, Interrupted};
+use super::render_vpl::{VplArgs, VplRun};
 use super::sequence_files::{frame_path, preview_path, FrameStamp};
 
 /// Largest frame number accepted.
@@ -125,19 +133,60 @@ impl SequenceArgs {
     }
 }
 
-/// How each frame is rendered: plain path tracing, or the filtered pipeline (which keeps its
-/// buffers from frame to frame).
+/// How the frames are rendered, chosen (and their memory checked) before the scene is
+/// loaded.
+enum Method<'a> {
+    Plain,
+    Filtered(filtrace_pipeline::PipelineSettings, filtrace_pipeline::FilterChoice),
+    Vpl(&'a VplArgs),
+}
+
+impl<'a> Method<'a> {
+    fn choose(
+        common: &CommonArgs,
+        filter: &FilterArgs,
+        adaptive: &AdaptiveArgs,
+        vpl: &'a VplArgs,
+    ) -> anyhow::Result<Self> {
+        if vpl.enabled() {
+            vpl.check_memory(common)?;
+            return Ok(Method::Vpl(vpl));
+        }
+        if filter.enabled() || adaptive.adaptive {
+            let (settings, choice) = super::render_filtered::pipeline_settings(common, filter, adaptive)?;
+            return Ok(Method::Filtered(settings, choice));
+        }
+        let s = common.settings()?;
+        check_memory(filtrace_render::memory::plain_render(s.width, s.height))?;
+        Ok(Method::Plain)
+    }
+
+    /// The method as a frame's settings stamp says it.
+    fn stamp(&self, common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) -> String {
+        match self {
+            Method::Plain => "path".to_string(),
+            Method::Filtered(..) => format!("{filter:?} {adaptive:?}"),
+            Method::Vpl(v) => v.stamp(common.pass_spp()),
+        }
+    }
+}
+
+/// How each frame is rendered: plain path tracing, the filtered pipeline (which keeps its
+/// buffers from frame to frame), or the VPL integrator (which keeps its optimiser's state).
 enum Engine<'a> {
     Plain(PlainRun<'a>, Box<filtrace_render::Renderer>),
     Filtered(FilteredRun<'a>, Box<Pipeline>),
+    Vpl(VplRun<'a>, Box<filtrace_render::Renderer>),
 }
 
-/// A rendered frame: its JSON summary, and whether Ctrl-C cut it short.
+/// A rendered frame: its JSON summary, whether Ctrl-C cut it short, and the milliseconds
+/// per stage for the human line (VPL frames; empty otherwise).
 struct Rendered {
     summary: serde_json::Value,
     output: PathBuf,
     cancelled: bool,
     note: String,
+    stages: String,
 }
 
 impl Engine<'_> {
@@ -145,6 +194,7 @@ impl Engine<'_> {
         match self {
             Engine::Plain(_, r) => r,
             Engine::Filtered(_, p) => p.source_mut().renderer_mut(),
+            Engine::Vpl(_, r) => r,
         }
     }
 
@@ -163,6 +213,7 @@ impl Engine<'_> {
                     output: out.to_path_buf(),
                     cancelled: s.cancelled,
                     summary: serde_json::to_value(&s).unwrap_or_default(),
+                    stages: String::new(),
                 })
             }
             Engine::Filtered(run, pipeline) => {
@@ -171,6 +222,17 @@ impl Engine<'_> {
                     output: out.to_path_buf(),
                     cancelled: s.cancelled,
                     summary: serde_json::to_value(&s).unwrap_or_default(),
+                    stages: String::new(),
+                })
+            }
+            Engine::Vpl(run, renderer) => {
+                run.prepare(renderer, stamp.frame as i64)?;
+                run.render_frame(renderer, out, &attributes, bar)?.map(|s| Rendered {
+                    note: super::render_vpl::cancelled_note(&s),
+                    output: out.to_path_buf(),
+                    cancelled: s.cancelled,
+                    summary: serde_json::to_value(&s).unwrap_or_default(),
+                    stages: s.stages(),
                 })
             }
         })
@@ -216,51 +278,17 @@ pub fn run(
     common: &CommonArgs,
     filter: &FilterArgs,
     adaptive: &AdaptiveArgs,
+    vpl: &VplArgs,
     seq: &SequenceArgs,
 ) -> anyhow::Result<()> {
     let start = Instant::now();
-    let filtered = filter.enabled() || adaptive.adaptive;
-    let pipeline = match filtered {
-        true => Some(super::render_filtered::pipeline_settings(common, filter, adaptive)?),
-        false => {
-            let s = common.settings()?;
-            check_memory(filtrace_render::memory::plain_render(s.width, s.height))?;
-            None
-        }
-    };
-    let method = match filtered {
-        true => format!("{filter:?} {adaptive:?}"),
-        false => "path".to_string(),
-    };
-    let (sequence, load) = prepare(common, seq, &method)?;
+    let method = Method::choose(common, filter, adaptive, vpl)?;
+    let stamp = method.stamp(common, filter, adaptive);
+    let (sequence, load) = prepare(common, seq, &stamp, matches!(method, Method::Vpl(_)))?;
     let first = sequence.frames.iter().find(|(_, keep)| !keep).map(|(s, _)| s.frame as i64);
     let mut engine = match first {
         None => None,
-        Some(f) => {
-            let scene = sequence.source.scene_at(f)?;
-            let flag = sequence.ctrlc.flag();
-            Some(match pipeline {
-                None => Engine::Plain(
-                    PlainRun { c: common, pool: &sequence.pool, cancel: flag, load: &load },
-                    Box::new(build_renderer(scene, common, &sequence.pool)?),
-                ),
-                Some((settings, choice)) => {
-                    let trace = common.trace.map(|t| t.mode());
-                    let mut p = sequence.pool.install(|| {
-                        build_pipeline_traced(scene, settings, common.max_depth, &choice, trace)
-                    })?;
-                    p.set_cancel(Some(flag.clone()));
-                    let run = FilteredRun {
-                        common,
-                        adaptive,
-                        pool: &sequence.pool,
-                        cancel: flag,
-                        load_s: load.load_s,
-                    };
-                    Engine::Filtered(run, Box::new(p))
-                }
-            })
-        }
+        Some(f) => Some(sequence.engine(method, f, adaptive, &load)?),
     };
     test_hook("built", sequence.ctrlc.flag());
     sequence.ctrlc.arm();
@@ -276,6 +304,7 @@ fn prepare<'a>(
     common: &'a CommonArgs,
     seq: &SequenceArgs,
     method: &str,
+    vpl: bool,
 ) -> anyhow::Result<(Sequence<'a>, LoadReport)> {
     // First: until the render starts, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
@@ -293,8 +322,15 @@ fn prepare<'a>(
     }
     if !common.json {
         load.load_warnings.iter().for_each(|w| eprintln!("warning: {w}"));
-        if source.clock().is_none() {
-            eprintln!("note: scene '{}' has no animation: every frame is the same image", common.scene);
+        match (source.clock(), vpl) {
+            (Some(_), _) => {}
+            (None, false) => {
+                eprintln!("note: scene '{}' has no animation: every frame is the same image", common.scene)
+            }
+            (None, true) => eprintln!(
+                "note: scene '{}' has no animation: every frame is the same world, lit by VPLs drawn anew each frame",
+                common.scene
+            ),
         }
     }
     let settings = format!(
@@ -320,6 +356,37 @@ fn prepare<'a>(
 }
 
 impl Sequence<'_> {
+    /// The engine that renders the frames, built for the scene posed at `first`.
+    fn engine<'s>(
+        &'s self,
+        method: Method,
+        first: i64,
+        adaptive: &'s AdaptiveArgs,
+        load: &'s LoadReport,
+    ) -> anyhow::Result<Engine<'s>> {
+        let (common, pool, flag) = (self.common, &self.pool, self.ctrlc.flag());
+        let scene = self.source.scene_at(first)?;
+        Ok(match method {
+            Method::Plain => Engine::Plain(
+                PlainRun { c: common, pool, cancel: flag, load },
+                Box::new(build_renderer(scene, common, pool)?),
+            ),
+            Method::Filtered(settings, choice) => {
+                let trace = common.trace.map(|t| t.mode());
+                let mut p = pool
+                    .install(|| build_pipeline_traced(scene, settings, common.max_depth, &choice, trace))?;
+                p.set_cancel(Some(flag.clone()));
+                let run = FilteredRun { common, adaptive, pool, cancel: flag, load_s: load.load_s };
+                Engine::Filtered(run, Box::new(p))
+            }
+            Method::Vpl(v) => {
+                let renderer = build_renderer(scene, common, pool)?;
+                let settings = v.settings(renderer.lights().scene_radius())?;
+                Engine::Vpl(VplRun { c: common, settings, pool, cancel: flag }, Box::new(renderer))
+            }
+        })
+    }
+
     /// The frame loop: each frame kept by `--resume` or moved to, rendered and written,
     /// until the last or Ctrl-C. `first` is the frame `engine` was built for.
     fn render_all(&self, mut engine: Option<&mut Engine>) -> anyhow::Result<Done> {
@@ -344,7 +411,9 @@ impl Sequence<'_> {
             }
             // The pipeline does not count its samples: a bar of frames only.
             let bar = match engine {
-                Engine::Plain(..) => multi.add(progress_bar(0, &format!("frame {}", stamp.frame))),
+                Engine::Plain(..) | Engine::Vpl(..) => {
+                    multi.add(progress_bar(0, &format!("frame {}", stamp.frame)))
+                }
                 Engine::Filtered(..) => indicatif::ProgressBar::hidden(),
             };
             let rendered = engine.render(&exr, stamp, &bar)?;
@@ -395,9 +464,11 @@ impl Sequence<'_> {
             match rendered {
                 Some(r) => writeln!(
                     stdout,
-                    "frame {} (t = {:.3} s): wrote {} and {}{}",
+                    "frame {} (t = {:.3} s): {}{}wrote {} and {}{}",
                     stamp.frame,
                     stamp.time_s,
+                    r.stages,
+                    if r.stages.is_empty() { "" } else { "; " },
                     r.output.display(),
                     png.display(),
                     if r.cancelled { " (cut short by Ctrl-C)" } else { "" }

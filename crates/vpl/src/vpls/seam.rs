@@ -16,11 +16,16 @@
 //! pixel), run by [`Renderer::render_pass`]; after each, the `optimized` sampler learns
 //! ([`super::VplIntegrator`]'s `end_pass`). A pass stopped by `cancel` leaves every pixel
 //! with a prefix of its samples, each unbiased, as for the path tracer.
+//!
+//! [`frame_memory`] estimates the integrator's own buffers before anything is allocated.
 
+use super::eval::Receiver;
 use super::integrator::{StageTimes, VplIntegrator, VplSettings};
-use super::Vpls;
-use filtrace_core::Image;
+use super::{Vpl, Vpls};
+use crate::cache::{CacheRecord, RecordParams, SampleFeedback, SamplerKind, StoredSample};
+use filtrace_core::{Image, Vec3};
 use filtrace_render::film::Film;
+use filtrace_render::memory::{bytes_of, image_bytes, MemoryEstimate};
 use filtrace_render::renderer::progressive_passes;
 use filtrace_render::Renderer;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -100,4 +105,139 @@ pub fn render_vpl_frame(
 ) -> Result<Option<VplFrame>, String> {
     use_vpl_integrator(renderer, settings)?;
     render_vpl_passes(renderer, spp, u32::MAX, cancel)
+}
+
+/// Bytes the VPL integrator allocates for a `width x height` frame with `settings` on
+/// `threads` threads, rendered in passes of at most `max_pass` samples per pixel, beside
+/// the film and the outputs (the path tracer's [`filtrace_render::memory::plain_render`]):
+/// - the G-buffer: a receiver per pixel while the cache is built, positions and normals
+///   kept for the frame, and the cache-distance layer;
+/// - the VPLs, twice (the frame's report copies them);
+/// - the importance cache, twice: the previous frame's stays alive while the next one
+///   is built from it (its parameters are interpolated); per record three CDFs over the
+///   VPLs with their coarse index, plus each thread's values of the record it evaluates;
+/// - `optimized` only: each record's sample history and one pass's feedback, twice
+///   (the tiles' and the merged copy at the end of the pass).
+pub fn frame_memory(
+    width: u32,
+    height: u32,
+    settings: &VplSettings,
+    threads: usize,
+    max_pass: u32,
+) -> MemoryEstimate {
+    let pixels = width as u64 * height as u64;
+    let vpls = settings.vpls.count as u64 + 16;
+    let cached = !settings.ground_truth && settings.sampler.needs_cache();
+    let records = if cached { (settings.cache.cache_points as u64).min(pixels) } else { 0 };
+    // Three CDFs of `vpls + 1` values with a coarse index of one value per 32 cells; the
+    // record, its parameters and its search-tree entry (a point, a normal, ~16 bytes).
+    let per_record = bytes_of::<f32>(3 * (vpls + 1 + vpls.div_ceil(32)))
+        + bytes_of::<CacheRecord>(1)
+        + bytes_of::<RecordParams>(1)
+        + bytes_of::<Vec3>(2)
+        + 16;
+    // `RecordValues`: three luminances, two RGB contributions and a visibility per VPL.
+    let scratch = threads as u64 * vpls * (3 * 4 + 2 * 12 + 1);
+    let learns = cached && settings.sampler == SamplerKind::Optimized;
+    let history = records * settings.cache.optimizer.history as u64;
+    let feedback = pixels * max_pass as u64;
+    MemoryEstimate::new(format!("the VPL integrator at {width}x{height}"))
+        .with("G-buffer", pixels * (bytes_of::<Option<Receiver>>(1) + bytes_of::<Vec3>(2)))
+        .with("cache distance", image_bytes(width, height, 1))
+        .with("VPLs", 2 * bytes_of::<Vpl>(vpls))
+        .with("importance cache", 2 * records * per_record + scratch * cached as u64)
+        .with("optimiser history", learns as u64 * bytes_of::<StoredSample>(history))
+        .with("pass feedback", learns as u64 * 2 * bytes_of::<SampleFeedback>(feedback))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::{CacheParams, ImportanceCache};
+    use crate::vpls::VplParams;
+    use filtrace_render::RenderSettings;
+
+    fn animated_cornell() -> Renderer {
+        let scene = filtrace_scene::builtin("cornell-anim").expect("built-in animated Cornell box");
+        let settings = RenderSettings { width: 16, height: 16, spp: 1, max_depth: 4, seed: 1 };
+        Renderer::new(scene, settings).expect("settings")
+    }
+
+    fn optimized() -> VplSettings {
+        VplSettings {
+            vpls: VplParams { count: 64, direct: 8, ..VplParams::thesis() },
+            sampler: SamplerKind::Optimized,
+            cache: CacheParams { cache_points: 8, ..CacheParams::default() },
+            ground_truth: false,
+        }
+    }
+
+    /// `Σ w_l θ_l` over the records of `previous` nearest to each record of `next` (a
+    /// record on top of an old one copies it), computed here from the search alone.
+    fn interpolated(previous: &ImportanceCache, next: &ImportanceCache) -> Vec<RecordParams> {
+        let old = previous.params();
+        next.records()
+            .iter()
+            .map(|r| {
+                let nb = previous.neighbours(r.point.position, r.point.normal);
+                let nearest = nb.iter().next();
+                match nearest {
+                    Some((l, _)) if nb.closest_distance() == Some(0.0) => old[l],
+                    _ => RecordParams::blend(nb.iter().map(|(l, w)| (&old[l], w))),
+                }
+            })
+            .collect()
+    }
+
+    /// Thesis 5.2.2: a frame starts from the parameters the frame before it learnt,
+    /// interpolated at its own records. Frame 10 of the animated Cornell box learns over
+    /// 32 spp; the camera moves, so frame 11's records are new points, and their
+    /// parameters are the interpolation of frame 10's learnt ones, not the prior. Frame 11
+    /// prepared alone starts from the prior.
+    #[test]
+    fn the_next_frame_starts_from_the_parameters_learnt_in_this_one() {
+        let (settings, cancel) = (optimized(), AtomicBool::new(false));
+        let mut r = animated_cornell();
+        r.prepare_frame(10).unwrap();
+        render_vpl_frame(&mut r, &settings, 32, &cancel).unwrap().unwrap();
+        let learnt = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
+        let prior = RecordParams::prior(&settings.cache);
+        assert!(learnt.params().iter().any(|p| *p != prior), "the optimiser took no step in frame 10");
+        r.prepare_frame(11).unwrap();
+        let next = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
+        let moved = next.records().iter().filter(|rec| {
+            learnt.neighbours(rec.point.position, rec.point.normal).closest_distance() != Some(0.0)
+        });
+        assert!(moved.count() > 0, "the camera moves: frame 11 has records of its own");
+        assert_eq!(next.params(), &interpolated(&learnt, &next)[..]);
+        assert!(next.params().iter().any(|p| *p != prior), "frame 11 forgot what frame 10 learnt");
+
+        let mut alone = animated_cornell();
+        alone.prepare_frame(11).unwrap();
+        use_vpl_integrator(&mut alone, &settings).unwrap();
+        let fresh = alone.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
+        assert_eq!(fresh.records().len(), next.records().len());
+        assert!(fresh.params().iter().all(|p| *p == prior), "a frame prepared alone starts a priori");
+    }
+
+    /// The memory estimate grows with what the integrator allocates: the cache with
+    /// VPLs x cache points, nothing of it for the ground truth, the optimiser's buffers
+    /// for `optimized` only.
+    #[test]
+    fn frame_memory_follows_the_settings() {
+        let s = VplSettings::default();
+        let total = |s: &VplSettings| frame_memory(512, 512, s, 2, 4).total();
+        let cache = |s: &VplSettings| frame_memory(512, 512, s, 2, 4).part("importance cache");
+        let big = VplSettings { vpls: VplParams::with_count(20_000), ..s.clone() };
+        assert!(cache(&big) > 9 * cache(&s), "{} vs {}", cache(&big), cache(&s));
+        // 2048 records x 2048 VPLs x 3 CDFs of f32, kept twice: at least 100 MB.
+        assert!(cache(&s) > 2 * 2048 * 2048 * 3 * 4);
+        let truth = VplSettings { ground_truth: true, ..s.clone() };
+        assert_eq!(cache(&truth), 0);
+        let balance = VplSettings { sampler: SamplerKind::Balance, ..s.clone() };
+        let learning = frame_memory(512, 512, &s, 2, 4);
+        assert!(learning.part("optimiser history") > 0 && learning.part("pass feedback") > 0);
+        assert_eq!(frame_memory(512, 512, &balance, 2, 4).part("optimiser history"), 0);
+        assert!(total(&balance) < total(&s));
+    }
 }

@@ -1,0 +1,318 @@
+//! `filtrace render SCENE --integrator vpl --frames A..B` end to end: one EXR (the usual
+//! layers, `cache_distance`, motion) + PNG per frame and the preview; identical files for
+//! the same command and for 1 or 2 threads; a frame of a sequence against the same frame
+//! rendered alone (equal for `balance`, different for `optimized`, whose parameters carry
+//! over); `--ground-truth` per frame; Ctrl-C; the memory check; options that do not
+//! combine (docs/many-light.md, "Sequences").
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_filtrace"))
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("filtrace-vplseq-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A tiny VPL render: 16x12, 8 spp in passes of 1 (the optimiser learns after each), 64
+/// VPLs and 8 cache points, so that every record sees enough samples to step.
+const TINY: [(&str, &str); 8] = [
+    ("--integrator", "vpl"),
+    ("--res", "16x12"),
+    ("--spp", "8"),
+    ("--passes-spp", "1"),
+    ("--max-depth", "4"),
+    ("--vpls", "64"),
+    ("--cache-points", "8"),
+    ("--threads", "2"),
+];
+
+/// `render SCENE` with the options of TINY that `extra` does not give, then `extra`.
+fn args<'a>(scene: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let defaults = TINY.iter().filter(|(k, _)| !extra.contains(k)).flat_map(|(k, v)| [*k, *v]);
+    ["render", scene].into_iter().chain(defaults).chain(extra.iter().copied()).collect()
+}
+
+/// `filtrace render SCENE TINY EXTRA --out OUT`.
+fn render(scene: &str, extra: &[&str], out: &Path) -> Output {
+    bin().args(args(scene, extra)).arg("--out").arg(out).output().expect("filtrace runs")
+}
+
+fn ok(o: Output) -> Output {
+    assert!(o.status.success(), "failed: {}", stderr(&o));
+    o
+}
+
+fn json_lines(o: &Output) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a JSON line ({e}): {l}")))
+        .collect()
+}
+
+/// Each channel of the EXR at `path`, by name, as bits.
+fn channel_bits(path: &Path) -> Vec<(String, Vec<u32>)> {
+    let exr = filtrace_io::read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut names = exr.channel_names();
+    names.sort();
+    names
+        .into_iter()
+        .map(|n| (n.clone(), exr.channel(&n).unwrap().iter().map(|v| v.to_bits()).collect()))
+        .collect()
+}
+
+fn frame(dir: &Path, name: &str, k: u32) -> PathBuf {
+    dir.join(format!("{name}.{k:04}.exr"))
+}
+
+#[test]
+fn a_classroom_vpl_sequence_writes_every_frame_with_its_layers() {
+    let dir = temp_dir("files");
+    let o = ok(render("classroom", &["--frames", "0..2", "--json"], &dir.join("c.exr")));
+    let lines = json_lines(&o);
+    assert_eq!(lines.len(), 4, "one line per frame and the summary");
+    let mut seeds = Vec::new();
+    for (k, line) in lines[..3].iter().enumerate() {
+        assert_eq!((line["kind"].as_str(), line["frame"].as_u64()), (Some("frame"), Some(k as u64)));
+        for key in ["vpl_generation_ms", "cache_ms", "shading_ms", "optimisation_ms", "cache_records"] {
+            assert!(line[key].as_f64().is_some(), "frame {k} lacks '{key}': {line}");
+        }
+        assert_eq!((line["spp_done"].as_u64(), line["sampler"].as_str()), (Some(8), Some("optimized")));
+        let want =
+            filtrace_vpl::vpls::frame_vpl_seed(filtrace_vpl::vpls::VplParams::thesis().seed, 0, k as i64);
+        assert_eq!(line["vpl_seed"].as_u64(), Some(want), "frame {k}: the VPL seed of its frame");
+        seeds.push(want);
+        let exr = filtrace_io::read_exr(frame(&dir, "c", k as u32)).unwrap();
+        for layer in ["color", "direct", "indirect", "albedo", "normal", "depth", "variance", "samples"] {
+            assert!(exr.layer(&[layer]).is_some(), "frame {k} lacks '{layer}'");
+        }
+        for ch in ["cache_distance.Y", "motion.X", "prev_depth.Z"] {
+            assert!(exr.channel(ch).is_some(), "frame {k} lacks {ch}: {:?}", exr.channel_names());
+        }
+        assert!(exr.channel("cache_distance.Y").unwrap().iter().any(|&d| d > 0.0), "frame {k}: no cache");
+        assert_eq!(exr.attribute("filtrace:frame"), Some(k.to_string().as_str()));
+        assert_eq!(exr.attribute("filtrace:cancelled"), Some("false"));
+        assert!(exr.layer(&["color"]).unwrap().mean()[1] > 0.0, "frame {k} is black");
+        assert!(frame(&dir, "c", k as u32).with_extension("png").exists());
+    }
+    seeds.dedup();
+    assert_eq!(seeds.len(), 3, "a VPL seed per frame");
+    assert_eq!(lines[3]["rendered"], serde_json::json!([0, 1, 2]));
+    assert!(dir.join("c.preview.png").exists());
+    let bits: Vec<_> = (0..3).map(|k| channel_bits(&frame(&dir, "c", k))).collect();
+    assert!(bits[0] != bits[1] && bits[1] != bits[2] && bits[0] != bits[2], "frames repeat");
+    // The human line of a frame has the stage milliseconds.
+    let o = ok(render("classroom", &["--frames", "1..1"], &dir.join("h.exr")));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("frame 1 (t = ") && text.contains(" ms, cache "), "{text}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The same command twice, and with 1 or 2 threads: the same files, bit for bit (the
+/// optimiser learns after every pass and carries its parameters over two frames).
+#[test]
+fn vpl_sequences_are_deterministic_whatever_the_thread_count() {
+    let dir = temp_dir("determinism");
+    for (name, threads) in [("a", "2"), ("b", "2"), ("c", "1")] {
+        ok(render(
+            "classroom",
+            &["--frames", "0..2", "--threads", threads],
+            &dir.join(format!("{name}.exr")),
+        ));
+    }
+    for k in 0..3 {
+        let a = channel_bits(&frame(&dir, "a", k));
+        assert!(a == channel_bits(&frame(&dir, "b", k)), "frame {k} differs between two runs");
+        assert!(a == channel_bits(&frame(&dir, "c", k)), "frame {k} differs between 1 and 2 threads");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A sequence carries the optimiser's state (thesis 5.2.2): frame 2 of `--frames 0..2`
+/// starts from what frames 0 and 1 learnt, `--frames 2..2` from the prior, so the two
+/// differ for `optimized`; for `balance`, which learns nothing, they are equal bit for
+/// bit. Frame 0 of a sequence is the still render.
+#[test]
+fn a_lone_frame_equals_its_frame_in_a_sequence_unless_the_sampler_learns() {
+    let dir = temp_dir("lone");
+    for sampler in ["balance", "optimized"] {
+        let sampler_args = ["--vpl-sampler", sampler, "--json"];
+        let seq = ok(render(
+            "cornell-anim",
+            &[&sampler_args[..], &["--frames", "0..2"]].concat(),
+            &dir.join("s.exr"),
+        ));
+        ok(render("cornell-anim", &[&sampler_args[..], &["--frames", "2..2"]].concat(), &dir.join("l.exr")));
+        let (in_sequence, alone) = (channel_bits(&frame(&dir, "s", 2)), channel_bits(&frame(&dir, "l", 2)));
+        if sampler == "balance" {
+            assert!(in_sequence == alone, "balance: frame 2 differs alone");
+        } else {
+            let stepped = json_lines(&seq)[..2].iter().all(|l| l["records_stepped"].as_u64() > Some(0));
+            assert!(stepped, "optimized: frames 0 and 1 must learn for the test to mean anything");
+            assert!(in_sequence != alone, "optimized: frame 2 did not carry the parameters learnt before it");
+        }
+        ok(render("cornell-anim", &sampler_args, &dir.join("still.exr")));
+        assert!(
+            channel_bits(&dir.join("still.exr")) == channel_bits(&frame(&dir, "s", 0)),
+            "{sampler}: frame 0"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn ground_truth_and_resume_work_per_frame() {
+    let dir = temp_dir("truth");
+    let out = dir.join("t.exr");
+    let o = ok(render("cornell-anim", &["--ground-truth", "--frames", "3..4", "--spp", "2", "--json"], &out));
+    let lines = json_lines(&o);
+    for (k, line) in lines[..2].iter().enumerate() {
+        assert_eq!(line["sampler"], "exhaustive", "frame {}", 3 + k);
+        assert!(line["mean_rgb"][1].as_f64().unwrap() > 0.0);
+    }
+    // The frames on disk were rendered with these settings: kept; another sampler: redone.
+    let again = ["--ground-truth", "--frames", "3..4", "--spp", "2", "--json", "--resume"];
+    assert_eq!(
+        json_lines(&ok(render("cornell-anim", &again, &out)))[2]["resumed"],
+        serde_json::json!([3, 4])
+    );
+    let other = ["--frames", "3..4", "--spp", "2", "--json", "--resume"];
+    assert_eq!(
+        json_lines(&ok(render("cornell-anim", &other, &out)))[2]["rendered"],
+        serde_json::json!([3, 4])
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn options_that_do_not_combine_exit_2_naming_the_option() {
+    let dir = temp_dir("bad");
+    let out = dir.join("b.exr");
+    for (args, want) in [
+        (
+            &["--filter", "guided", "--frames", "0..1"][..],
+            "'--filter' cannot be used with '--integrator vpl'",
+        ),
+        (&["--filter", "atrous"][..], "'--filter' cannot be used"),
+        (&["--adaptive", "--frames", "0..1"][..], "'--adaptive' cannot be used"),
+        (&["--trace", "lockstep", "--frame", "1"][..], "'--trace' cannot be used"),
+        (&["--integrator", "path", "--ground-truth"][..], "'--ground-truth' needs '--integrator vpl'"),
+        (&["--integrator", "path", "--vpl-clamp", "0.1", "--frames", "0..1"][..], "'--vpl-clamp' needs"),
+    ] {
+        let o = render("cornell-anim", args, &out);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+        assert!(!stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a refused render wrote files");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The VPL cache's memory (three distributions over the VPLs per cache point) is
+/// estimated before the scene is loaded: 100 000 VPLs x 50 000 cache points are refused
+/// with the options to lower, nothing written.
+#[test]
+fn a_vpl_sequence_that_does_not_fit_in_memory_is_refused_before_loading() {
+    let dir = temp_dir("memory");
+    let big = ["--res", "512x512", "--vpls", "100000", "--cache-points", "50000", "--frames", "0..1"];
+    let o = bin()
+        .args(args("classroom", &big))
+        .arg("--out")
+        .arg(dir.join("m.exr"))
+        .env("FILTRACE_MEMORY_LIMIT", "8G")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    for want in ["importance cache", "--cache-points"] {
+        assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    }
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a refused render wrote files");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Runs `filtrace ARGS` pausing at test-hook stage `pause`, sends SIGINT when stderr says
+/// `filtrace-test: STAGE` and waits for the exit; returns the exit code, stdout and stderr.
+#[cfg(unix)]
+fn interrupt_at(args: &[&str], pause: &str, stage: &str) -> (Option<i32>, String, String) {
+    let mut child = bin()
+        .args(args)
+        .env("FILTRACE_TEST_PAUSE", pause)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let err = child.stderr.take().unwrap();
+    let (tx, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !seen.iter().any(|l: &String| l == &format!("filtrace-test: {stage}")) {
+        assert!(Instant::now() < deadline, "no stage '{stage}': {seen:?}");
+        if let Ok(l) = lines.recv_timeout(Duration::from_millis(50)) {
+            seen.push(l);
+        }
+    }
+    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(20), "still running after SIGINT");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut stdout = String::new();
+    child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+    seen.extend(lines.iter());
+    (child.wait().unwrap().code(), stdout, seen.join("\n"))
+}
+
+/// Ctrl-C as for the path tracer's sequences: after frame 1 is written, frames 0 and 1
+/// stay and nothing more is started; during frame 0's passes (after its second of 1 spp
+/// each), frame 0 is written cut short (every pixel has 2 samples) and marked so. Exit
+/// code 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_keeps_the_written_vpl_frames() {
+    let dir = temp_dir("cancel");
+    let out = dir.join("c.exr");
+    let args = args("cornell-anim", &["--frames", "0..3", "--json", "--out", out.to_str().unwrap()]);
+    let (code, stdout, err) = interrupt_at(&args, "frame 1 written", "frame 1 written");
+    assert_eq!(code, Some(130), "{err}");
+    for k in 0..2 {
+        let exr = filtrace_io::read_exr(frame(&dir, "c", k)).unwrap();
+        assert_eq!(exr.attribute("filtrace:cancelled"), Some("false"));
+    }
+    assert!(!frame(&dir, "c", 2).exists(), "frame 2 was started after Ctrl-C");
+    let last: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(
+        (last["cancelled"].as_bool(), last["rendered"].clone()),
+        (Some(true), serde_json::json!([0, 1]))
+    );
+
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let (code, stdout, err) = interrupt_at(&args, "pass 2", "pass 2");
+    assert_eq!(code, Some(130), "{err}");
+    let exr = filtrace_io::read_exr(frame(&dir, "c", 0)).unwrap();
+    assert_eq!(exr.attribute("filtrace:cancelled"), Some("true"));
+    assert_eq!(exr.attribute("filtrace:spp_done"), Some("2"));
+    assert!(!frame(&dir, "c", 1).exists());
+    let first: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
+    assert_eq!((first["frame"].as_u64(), first["cancelled"].as_bool()), (Some(0), Some(true)), "{first}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -251,7 +251,8 @@ fn bench_render_reports_the_same_image_at_every_thread_count() {
 
 /// `bench animation` on a small meadow: every frame update is a top-level refit or
 /// rebuild (never a full one), and the animated frame renders as the same frame built
-/// still (the same mean colour).
+/// still (the same mean colour up to the last bits: the still build merges every instance
+/// into world space, the animated one keeps the moving ones in object space).
 #[test]
 fn bench_animation_updates_the_top_level_only_and_matches_the_still_frame() {
     let args = ["bench", "animation", "--blades", "500", "--rounds", "1", "--res", "16x12", "--spp", "1"];
@@ -264,7 +265,10 @@ fn bench_animation_updates_the_top_level_only_and_matches_the_still_frame() {
     assert_eq!(v["update"]["lights_updated"], 0, "the ball does not emit");
     assert_eq!(v["update"]["triangle_records"], 960);
     assert!(v["full_build_s"].as_f64().unwrap() > 0.0);
-    assert_eq!(v["animated_mean_rgb"], v["still_mean_rgb"]);
+    for c in 0..3 {
+        let (a, b) = (v["animated_mean_rgb"][c].as_f64().unwrap(), v["still_mean_rgb"][c].as_f64().unwrap());
+        assert!((a - b).abs() <= 1e-6 * b.abs().max(1e-3), "channel {c}: animated {a}, still {b}");
+    }
     let table = run(bin().args(args));
     assert!(String::from_utf8_lossy(&table.stdout).contains("| update, mean |"));
 }

@@ -62,9 +62,11 @@ fn a_closed_stdout_pipe_ends_quietly_with_code_141() {
     let compare = ["compare", "a.exr", "a.exr", "--no-maps"];
     let render = ["render", "--res", "4x4", "--spp", "1", "--json", "--out", "b.exr"];
     for args in [&compare[..], &render[..]] {
-        let mut child =
-            bin().args(args).current_dir(&dir).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-        drop(child.stdout.take()); // the reader is gone before anything is printed
+        // The reader is closed before the child starts: dropping it after `spawn` raced
+        // with a fast command on a loaded machine, which then wrote into the open pipe.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let child = bin().args(args).current_dir(&dir).stdout(writer).stderr(Stdio::piped()).spawn().unwrap();
         let o = child.wait_with_output().unwrap();
         assert_no_panic(&o);
         assert_eq!(o.status.code(), Some(141), "{args:?}: {}", stderr(&o));

@@ -18,9 +18,10 @@
 //! - a camera change touches no geometry.
 //!
 //! The image of a frame reached by updates is the image of a renderer built from scratch
-//! on the posed scene, bit for bit (`tests/frames.rs`): hits do not depend on the BVH's
-//! shape (`filtrace_accel`'s tie rule), and every record is recomputed as a fresh build
-//! computes it.
+//! on the posed scene with the same animation data, bit for bit (`tests/frames.rs`): hits
+//! do not depend on the BVH's shape (`filtrace_accel`'s tie rule), and every record is
+//! recomputed as a fresh build computes it. A build without the animation data merges
+//! every instance into world space, which changes the last bits of the hits.
 //!
 //! Every update ([`Renderer::set_pose`], [`Renderer::prepare_frame`],
 //! [`Renderer::set_camera`]) begins a new frame: the state before it becomes the previous

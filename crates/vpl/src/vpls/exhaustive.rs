@@ -230,7 +230,7 @@ impl<'a> ShadowPackets<'a> {
     fn trace(&mut self, side: usize, class: usize, visible: &mut [bool]) {
         let (fan, ids, len) = &mut self.fans[side][class];
         let active = ((1u32 << *len) - 1) as u8;
-        let occluded = self.accel.occluded_fan(fan, active);
+        let occluded = super::rays::occluded_fan(self.accel, fan, active);
         for (i, &j) in ids[..*len].iter().enumerate() {
             visible[j as usize] = occluded & (1 << i) == 0;
         }

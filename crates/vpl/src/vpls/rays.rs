@@ -1,6 +1,7 @@
 //! Shadow-ray accounting for the experiments' clocks (the thesis, 6.5: "time without ray
 //! queries" and "number of rays"). Every shadow ray of the VPL renderer, in the cache
-//! evaluation, the shading and the exhaustive sum, goes through [`occluded`]: it counts
+//! evaluation, the shading and the exhaustive sum, goes through [`occluded`] (or, for the
+//! cache's rays from one record, [`occluded_fan`]): it counts
 //! per thread and, while [`record_every`] is on, keeps every k-th ray so that an
 //! experiment can replay them and time the ray queries alone. Images do not change.
 //!
@@ -8,7 +9,7 @@
 //! over the threads of the current rayon pool and the calling thread, so a caller that
 //! wants its own frame's counts runs it in a pool of its own.
 
-use filtrace_accel::SceneAccel;
+use filtrace_accel::{SceneAccel, SegmentFan};
 use filtrace_core::Ray;
 use std::cell::{Cell, RefCell};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -24,6 +25,23 @@ static KEEP_EVERY: AtomicU64 = AtomicU64::new(0);
 /// `accel.occluded(ray)`, counted (and kept while recording).
 #[inline]
 pub fn occluded(accel: &SceneAccel, ray: &Ray) -> bool {
+    count(ray);
+    accel.occluded(ray)
+}
+
+/// `accel.occluded_fan(fan, active)`, each active lane counted (and kept while recording)
+/// as one ray, as [`occluded`] counts it.
+#[inline]
+pub fn occluded_fan(accel: &SceneAccel, fan: &SegmentFan, active: u8) -> u8 {
+    let mut bits = active;
+    while bits != 0 {
+        count(&fan.lane(bits.trailing_zeros() as usize));
+        bits &= bits - 1;
+    }
+    accel.occluded_fan(fan, active)
+}
+
+fn count(ray: &Ray) {
     let n = TRACED.with(|c| {
         let n = c.get();
         c.set(n + 1);
@@ -33,7 +51,6 @@ pub fn occluded(accel: &SceneAccel, ray: &Ray) -> bool {
     if every != 0 && n.is_multiple_of(every) {
         KEPT.with(|k| k.borrow_mut().push(*ray));
     }
-    accel.occluded(ray)
 }
 
 /// Keep every `k`-th shadow ray of each thread from now on (0 stops). Process-wide.
@@ -76,6 +93,17 @@ mod tests {
             // Each thread keeps its 0th, 4th, ... ray: 25 or 26 of 100.
             assert!((25..=27).contains(&kept.len()), "{}", kept.len());
             assert!(kept.iter().all(|r| *r == ray));
+            // A fan counts its active lanes, and answers as the single rays do.
+            let mut fan = SegmentFan::new(ray.origin, 0.0);
+            for i in 0..5 {
+                fan.set_lane(i, filtrace_core::Vec3::new(0.01 * i as f32, 0.0, 1.0).normalize(), 2000.0);
+            }
+            let answer = occluded_fan(&accel, &fan, 0b10110);
+            let (after_fan, _) = pool_counts();
+            assert_eq!(after_fan - after, 3);
+            for i in [1, 2, 4] {
+                assert_eq!(answer & (1 << i) != 0, accel.occluded(&fan.lane(i)), "lane {i}");
+            }
         });
     }
 }

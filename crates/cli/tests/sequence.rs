@@ -2,54 +2,23 @@
 //! preview animation, a still scene's frame equal to its still render bit for bit, `--json`
 //! lines, `--resume`, Ctrl-C and bad frame ranges (docs/animation.md).
 
-use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+#[path = "support/run.rs"]
+mod run;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_filtrace"))
-}
+use run::*;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::Duration;
 
 fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("filtrace-seq-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    fresh_dir(&format!("seq-{tag}"))
 }
 
 /// `filtrace render SCENE --res 16x12 --spp 2 --threads 2 EXTRA --out OUT`.
 fn render(scene: &str, extra: &[&str], out: &Path) -> Output {
     let base = ["render", scene, "--res", "16x12", "--spp", "2", "--threads", "2", "--max-depth", "4"];
     bin().args(base).args(extra).arg("--out").arg(out).output().expect("the filtrace binary runs")
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "failed: {}", stderr(&o));
-    o
-}
-
-/// Every line of stdout as JSON.
-fn json_lines(o: &Output) -> Vec<serde_json::Value> {
-    String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a JSON line ({e}): {l}")))
-        .collect()
-}
-
-/// Each channel of the EXR at `path`, by name, as bits.
-fn channel_bits(path: &Path) -> Vec<(String, Vec<u32>)> {
-    let exr = filtrace_io::read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut names = exr.channel_names();
-    names.sort();
-    names
-        .into_iter()
-        .map(|n| (n.clone(), exr.channel(&n).unwrap().iter().map(|v| v.to_bits()).collect()))
-        .collect()
 }
 
 /// Size of the PNG at `path`, decoded whole.
@@ -239,54 +208,6 @@ fn bad_frame_ranges_are_errors_naming_the_value() {
     }
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a refused sequence wrote files");
     std::fs::remove_dir_all(&dir).ok();
-}
-
-/// Starts `filtrace ARGS` pausing at test-hook stage `pause`; returns it and its stderr lines.
-#[cfg(unix)]
-fn start(args: &[&str], pause: &str) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
-    let mut child = bin()
-        .args(args)
-        .env("FILTRACE_TEST_PAUSE", pause)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let err = child.stderr.take().unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(err).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    (child, rx)
-}
-
-/// Waits (at most 60 s) for `filtrace-test: STAGE`, sends SIGINT and waits for the exit;
-/// returns the exit code, stdout and stderr.
-#[cfg(unix)]
-fn interrupt_at(args: &[&str], pause: &str, stage: &str, delay: Duration) -> (Option<i32>, String, String) {
-    let (mut child, lines) = start(args, pause);
-    let mut seen = Vec::new();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !seen.iter().any(|l: &String| l == &format!("filtrace-test: {stage}")) {
-        assert!(Instant::now() < deadline, "no stage '{stage}': {seen:?}");
-        if let Ok(l) = lines.recv_timeout(Duration::from_millis(50)) {
-            seen.push(l);
-        }
-    }
-    std::thread::sleep(delay);
-    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        assert!(start.elapsed() < Duration::from_secs(20), "still running after SIGINT");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let mut stdout = String::new();
-    child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
-    seen.extend(lines.iter());
-    (child.wait().unwrap().code(), stdout, seen.join("\n"))
 }
 
 /// Ctrl-C after frame 1 of 0..3 is written: frames 0 and 1 stay, 2 and 3 are not started,

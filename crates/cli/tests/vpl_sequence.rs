@@ -5,24 +5,16 @@
 //! over); `--ground-truth` per frame; Ctrl-C; the memory check; options that do not
 //! combine (docs/many-light.md, "Sequences").
 
-use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+#[path = "support/run.rs"]
+mod run;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_filtrace"))
-}
+use run::*;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::Duration;
 
 fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("filtrace-vplseq-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    fresh_dir(&format!("vplseq-{tag}"))
 }
 
 /// A tiny VPL render: 16x12, 8 spp in passes of 1 (the optimiser learns after each), 64
@@ -47,29 +39,6 @@ fn args<'a>(scene: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
 /// `filtrace render SCENE TINY EXTRA --out OUT`.
 fn render(scene: &str, extra: &[&str], out: &Path) -> Output {
     bin().args(args(scene, extra)).arg("--out").arg(out).output().expect("filtrace runs")
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "failed: {}", stderr(&o));
-    o
-}
-
-fn json_lines(o: &Output) -> Vec<serde_json::Value> {
-    String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a JSON line ({e}): {l}")))
-        .collect()
-}
-
-/// Each channel of the EXR at `path`, by name, as bits.
-fn channel_bits(path: &Path) -> Vec<(String, Vec<u32>)> {
-    let exr = filtrace_io::read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut names = exr.channel_names();
-    names.sort();
-    names
-        .into_iter()
-        .map(|n| (n.clone(), exr.channel(&n).unwrap().iter().map(|v| v.to_bits()).collect()))
-        .collect()
 }
 
 fn frame(dir: &Path, name: &str, k: u32) -> PathBuf {
@@ -241,46 +210,6 @@ fn a_vpl_sequence_that_does_not_fit_in_memory_is_refused_before_loading() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Runs `filtrace ARGS` pausing at test-hook stage `pause`, sends SIGINT when stderr says
-/// `filtrace-test: STAGE` and waits for the exit; returns the exit code, stdout and stderr.
-#[cfg(unix)]
-fn interrupt_at(args: &[&str], pause: &str, stage: &str) -> (Option<i32>, String, String) {
-    let mut child = bin()
-        .args(args)
-        .env("FILTRACE_TEST_PAUSE", pause)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let err = child.stderr.take().unwrap();
-    let (tx, lines) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(err).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    let mut seen = Vec::new();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !seen.iter().any(|l: &String| l == &format!("filtrace-test: {stage}")) {
-        assert!(Instant::now() < deadline, "no stage '{stage}': {seen:?}");
-        if let Ok(l) = lines.recv_timeout(Duration::from_millis(50)) {
-            seen.push(l);
-        }
-    }
-    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        assert!(start.elapsed() < Duration::from_secs(20), "still running after SIGINT");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let mut stdout = String::new();
-    child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
-    seen.extend(lines.iter());
-    (child.wait().unwrap().code(), stdout, seen.join("\n"))
-}
-
 /// Ctrl-C as for the path tracer's sequences: after frame 1 is written, frames 0 and 1
 /// stay and nothing more is started; during frame 0's passes (after its second of 1 spp
 /// each), frame 0 is written cut short (every pixel has 2 samples) and marked so. Exit
@@ -291,7 +220,7 @@ fn ctrl_c_keeps_the_written_vpl_frames() {
     let dir = temp_dir("cancel");
     let out = dir.join("c.exr");
     let args = args("cornell-anim", &["--frames", "0..3", "--json", "--out", out.to_str().unwrap()]);
-    let (code, stdout, err) = interrupt_at(&args, "frame 1 written", "frame 1 written");
+    let (code, stdout, err) = interrupt_at(&args, "frame 1 written", "frame 1 written", Duration::ZERO);
     assert_eq!(code, Some(130), "{err}");
     for k in 0..2 {
         let exr = filtrace_io::read_exr(frame(&dir, "c", k)).unwrap();
@@ -306,7 +235,7 @@ fn ctrl_c_keeps_the_written_vpl_frames() {
 
     std::fs::remove_dir_all(&dir).ok();
     std::fs::create_dir_all(&dir).unwrap();
-    let (code, stdout, err) = interrupt_at(&args, "pass 2", "pass 2");
+    let (code, stdout, err) = interrupt_at(&args, "pass 2", "pass 2", Duration::ZERO);
     assert_eq!(code, Some(130), "{err}");
     let exr = filtrace_io::read_exr(frame(&dir, "c", 0)).unwrap();
     assert_eq!(exr.attribute("filtrace:cancelled"), Some("true"));

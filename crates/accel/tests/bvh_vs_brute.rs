@@ -1,11 +1,15 @@
 //! The BVH against the brute-force reference: same hits on random rays for every build
 //! preset, watertightness on closed meshes, degenerate input, instancing and updates.
 
+#[path = "support/rays.rs"]
+mod rays;
+
 use filtrace_accel::testmesh::{self, SplitMix64};
 use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd};
 use filtrace_core::shared_data::shared_path;
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
+use rays::random_rays;
 
 fn single(mesh: Mesh) -> Scene {
     let mut s = Scene::default();
@@ -38,28 +42,6 @@ fn instanced_scene() -> Scene {
         place(1, Vec3::splat(0.4), Quat::from_rotation_x(-1.0), Vec3::new(0.5, 0.5, -1.5)),
     ];
     s
-}
-
-/// Rays of every kind: from inside the bounds, from outside aimed at them, short
-/// segments, and segments starting past `t_min > 0`.
-fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
-    let b = scene.bounds();
-    let (c, r) = (b.center(), b.bounding_radius());
-    let mut rng = SplitMix64(seed);
-    (0..n)
-        .map(|i| {
-            let inside = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
-            match i % 4 {
-                0 => Ray::new(inside, rng.unit_vector()),
-                1 => {
-                    let o = c + rng.unit_vector() * 2.0 * r;
-                    Ray::new(o, (inside - o) * (0.1 + 3.0 * rng.next_f32()))
-                }
-                2 => Ray::segment(inside, rng.unit_vector(), 0.0, r * rng.next_f32()),
-                _ => Ray::segment(inside, rng.unit_vector() * 2.0, 0.3 * r * rng.next_f32(), f32::INFINITY),
-            }
-        })
-        .collect()
 }
 
 /// Checks one ray: the BVH gives exactly the brute-force hit (same bits of `t`, `u`, `v`:

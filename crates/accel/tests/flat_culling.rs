@@ -6,13 +6,13 @@
 //! light. Single rays, 8-ray packets with every lane count, both kernels, the flat bottom
 //! level and a BVH over the same triangles.
 
-use filtrace_accel::testmesh::SplitMix64;
-use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, LANES};
-use filtrace_core::{Ray, Vec3};
+#[path = "support/rays.rs"]
+mod rays;
 
-fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
-}
+use filtrace_accel::testmesh::SplitMix64;
+use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, LANES};
+use filtrace_core::{Ray, Vec3};
+use rays::bits;
 
 /// Rays from points of the Cornell box's triangles pushed off their planes by `offsets`
 /// along the normal, in random and in grazing directions, plus shadow segments from

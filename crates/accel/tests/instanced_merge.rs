@@ -3,10 +3,14 @@
 //! non-uniform and mirroring scales) within a tolerance, the memory budget, and animated
 //! scenes, whose moving instances are told at build time and stay apart.
 
-use filtrace_accel::testmesh::{self, SplitMix64};
+#[path = "support/rays.rs"]
+mod rays;
+
+use filtrace_accel::testmesh;
 use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd, TopLevelUpdate, MERGE_FLOOR_TRIANGLES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
+use rays::{bits, random_rays};
 
 fn kernels() -> Vec<Simd> {
     if Simd::Avx2.available() {
@@ -53,30 +57,6 @@ fn transformed_scene() -> Scene {
         s.instances.push(Instance { mesh, transform, material_override: None });
     }
     s
-}
-
-/// Random rays through the scene's bounds: from inside, from outside aimed in, segments.
-fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
-    let b = scene.bounds();
-    let (c, r) = (b.center(), b.bounding_radius());
-    let mut rng = SplitMix64(seed);
-    (0..n)
-        .map(|i| {
-            let inside = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
-            match i % 3 {
-                0 => Ray::new(inside, rng.unit_vector()),
-                1 => {
-                    let o = c + rng.unit_vector() * 2.0 * r;
-                    Ray::new(o, (inside - o) * (0.1 + 3.0 * rng.next_f32()))
-                }
-                _ => Ray::segment(inside, rng.unit_vector(), 0.0, r * rng.next_f32()),
-            }
-        })
-        .collect()
-}
-
-fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
 }
 
 /// Distance of barycentrics `(u, v)` from the triangle's boundary.

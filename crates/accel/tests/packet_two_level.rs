@@ -5,10 +5,14 @@
 //! ones and shadow segments, with random partial masks; both kernels. Brute force is
 //! [`BruteForce::build_like`]: merged instances tested in world space, as the BVH does.
 
+#[path = "support/rays.rs"]
+mod rays;
+
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, TopLevelUpdate, LANES};
+use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, TopLevelUpdate, LANES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
+use rays::bits;
 
 fn kernels() -> Vec<Simd> {
     if Simd::Avx2.available() {
@@ -48,10 +52,6 @@ fn random_scene(n: usize, seed: u64) -> Scene {
         s.instances.push(Instance { mesh, transform, material_override: None });
     }
     s
-}
-
-fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
 }
 
 /// Packets of three kinds: camera tiles (4x2 pixels of a 256x256 camera; coherent),

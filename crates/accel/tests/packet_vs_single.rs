@@ -3,10 +3,14 @@
 //! shadow rays towards a small quad) and incoherent rays, random active masks, invalid
 //! lanes, Cornell box vertices and edges; both kernels; flat, BVH and two-level scenes.
 
+#[path = "support/rays.rs"]
+mod rays;
+
 use filtrace_accel::testmesh::{self, SplitMix64};
 use filtrace_accel::{BuildParams, HitPacket, RayPacket, SceneAccel, Simd, LANES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
+use rays::bits;
 
 fn kernels() -> Vec<Simd> {
     if Simd::Avx2.available() {
@@ -61,10 +65,6 @@ fn accels(scene: &Scene) -> Vec<SceneAccel> {
         .iter()
         .flat_map(|p| kernels().into_iter().map(move |k| SceneAccel::build_simd(scene, p, k)))
         .collect()
-}
-
-fn bits(h: Option<filtrace_accel::Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
 }
 
 /// Packet queries equal the single-ray queries in every lane (inactive lanes: no hit).

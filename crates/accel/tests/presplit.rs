@@ -4,10 +4,14 @@
 //! 8-ray packets, alone and instanced, for every preset, budget and kernel; and its tree
 //! is not worse by the surface area heuristic than the one built without splitting.
 
-use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, Hit, RayPacket, SceneAccel, Simd, LANES};
+#[path = "support/rays.rs"]
+mod rays;
+
+use filtrace_accel::testmesh;
+use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, LANES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
+use rays::{bits, random_rays};
 
 fn kernels() -> Vec<Simd> {
     if Simd::Avx2.available() {
@@ -35,31 +39,6 @@ fn instanced_blades() -> Scene {
     s.instances.push(place(0.7, Quat::from_rotation_y(0.8), Vec3::new(2.5, 0.2, 0.0)));
     s.instances.push(place(1.3, Quat::from_rotation_x(0.4), Vec3::new(-0.5, 0.5, 2.5)));
     s
-}
-
-/// Rays from inside the bounds in random directions, rays from outside aimed inside, and
-/// short segments.
-fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
-    let b = scene.bounds();
-    let (c, r) = (b.center(), b.bounding_radius());
-    let mut rng = SplitMix64(seed);
-    (0..n)
-        .map(|i| {
-            let inside = b.min + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * b.extent();
-            match i % 3 {
-                0 => Ray::new(inside, rng.unit_vector()),
-                1 => {
-                    let o = c + rng.unit_vector() * 2.0 * r;
-                    Ray::new(o, inside - o)
-                }
-                _ => Ray::segment(inside, rng.unit_vector(), 0.0, 0.3 * r * rng.next_f32()),
-            }
-        })
-        .collect()
-}
-
-fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
 }
 
 /// Single-ray and packet queries of `accel` equal brute force on `rays`; returns the hits.

@@ -675,24 +675,8 @@ pub(crate) unsafe fn occluded_bvh(
     rays: &RayPacket,
     active: u8,
 ) -> Option<u8> {
-    occluded_bvh_within(nodes, tris, rays, active, MAX_SPREAD)
-}
-
-/// [`occluded_bvh`] for packets whose direction spread is at most `max_spread` (`inf`:
-/// any spread; `shared_origin.rs` passes its own bound for rays from one origin).
-///
-/// # Safety
-/// The CPU has AVX2 and FMA.
-#[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn occluded_bvh_within(
-    nodes: &[Node8],
-    tris: &TriPackets,
-    rays: &RayPacket,
-    active: u8,
-    max_spread: f32,
-) -> Option<u8> {
     let b = Boxes8::new(rays, active as u32)?;
-    if max_spread < f32::INFINITY && direction_spread(rays, active as u32) > max_spread {
+    if direction_spread(rays, active as u32) > MAX_SPREAD {
         return None;
     }
     let r = setup(rays, active as u32);

@@ -109,7 +109,7 @@ pub use brute::BruteForce;
 pub use merge::{MERGE_FLOOR_TRIANGLES, MERGE_GROWTH};
 pub use ray_packet::{HitPacket, RayPacket, LANES};
 pub use sah::BuildParams;
-pub use shared_origin::{fan_class, SegmentFan, FAN_CLASSES, FAN_MAX_SPREAD};
+pub use shared_origin::{fan_class, SegmentFan, FAN_CLASSES};
 
 use blas::Blas;
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};

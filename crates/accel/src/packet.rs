@@ -31,8 +31,8 @@ pub(crate) const MIN_LANES_ANY: u32 = 3;
 
 /// The thresholds of the packet traversal of BVH meshes (camera tiles on the bunny, single
 /// / packet: 4 lanes 1.05x, 3 lanes 0.93x; docs/perf-accel.md, third pass).
-pub(crate) const MIN_LANES_CLOSEST_BVH: u32 = 4;
-pub(crate) const MIN_LANES_ANY_BVH: u32 = 5;
+const MIN_LANES_CLOSEST_BVH: u32 = 4;
+const MIN_LANES_ANY_BVH: u32 = 5;
 
 /// Fewest active lanes for which scenes of several objects take the packet through the
 /// top level (`packet_two_level.rs`) rather than one single-ray query per lane. The
@@ -175,7 +175,7 @@ impl SceneAccel {
     /// must be moved into its object space ([`Self::object_space_rays`]; not for the merged
     /// meshes and untransformed instances, whose rays are used as they are, without a copy).
     #[inline]
-    pub(crate) fn single_object(&self) -> Option<(u32, bool)> {
+    fn single_object(&self) -> Option<(u32, bool)> {
         let object = self.single?;
         Some((object, object != MERGED && !self.instances[object as usize].identity))
     }
@@ -183,7 +183,7 @@ impl SceneAccel {
     /// The single object's rays and lanes to trace: `rays` as they are, or (`transformed`)
     /// moved into its object space, in `local`.
     #[inline(always)]
-    pub(crate) fn object_rays<'a>(
+    fn object_rays<'a>(
         &self,
         object: u32,
         transformed: bool,

@@ -12,9 +12,9 @@
 //! - a single flat object (the Cornell box): the flat 8 rays x 1 triangle kernel, as for any
 //!   packet ([`SceneAccel::occluded_packet`]);
 //! - a single object with an 8-wide BVH: one traversal for the whole fan when its lanes
-//!   share a class and their directions lie within [`FAN_MAX_SPREAD`]; segments from
-//!   one point visit the same nodes around it, so the bound can be wider than that of
-//!   rays from a camera tile (`avx2_packet::MAX_SPREAD`);
+//!   share a class and their directions lie within the packet kernel's spread bound
+//!   (`avx2_packet::MAX_SPREAD`, that of rays from a camera tile; whether fans, which
+//!   visit the same nodes around their origin, pay at a wider bound is not measured);
 //! - several objects: the packet walk of the top level (`packet_two_level.rs`);
 //! - otherwise, and without AVX2: one single-ray query per lane.
 //!
@@ -25,10 +25,6 @@
 use crate::ray_packet::{RayPacket, LANES};
 use crate::SceneAccel;
 use filtrace_core::{Ray, Vec3};
-
-/// Widest direction spread (`avx2_packet::direction_spread`, the largest per-axis range
-/// of the normalised directions) for which a fan on a BVH is traversed as one packet.
-pub const FAN_MAX_SPREAD: f32 = 0.03;
 
 /// Up to eight segments `origin + t dir_i`, `t ∈ [t_min, t_max_i]`, from one origin.
 #[derive(Clone, Copy, Debug)]
@@ -94,33 +90,9 @@ pub const FAN_CLASSES: usize = 24;
 
 impl SceneAccel {
     /// Bit `i` set iff lane `i` is active and its segment is occluded; per lane identical
-    /// to [`SceneAccel::occluded`] (see the module docs for how the fan is traced).
+    /// to [`SceneAccel::occluded`]. A fan is a packet: the class sorting makes it one the
+    /// packet kernels take (see the module docs).
     pub fn occluded_fan(&self, fan: &SegmentFan, active: u8) -> u8 {
-        #[cfg(target_arch = "x86_64")]
-        if let Some(occluded) = self.occluded_fan_bvh(fan, active) {
-            return occluded;
-        }
         self.occluded_packet(&fan.rays, active)
-    }
-
-    /// The fan on a single object's 8-wide BVH: one traversal for the packet, or one
-    /// query per lane where the kernel refuses it (lanes of different classes, too wide a
-    /// spread: `occluded_packet` would refuse it too, as [`FAN_MAX_SPREAD`] is at least
-    /// its bound); `None` for scenes of another shape and too few lanes.
-    #[cfg(target_arch = "x86_64")]
-    fn occluded_fan_bvh(&self, fan: &SegmentFan, active: u8) -> Option<u8> {
-        use crate::blas::Blas;
-        if self.simd != crate::Simd::Avx2 || active.count_ones() < crate::packet::MIN_LANES_ANY_BVH {
-            return None;
-        }
-        let (object, transformed) = self.single_object()?;
-        let Blas::Bvh8(bvh) = self.object_blas(object) else { return None };
-        let mut local = None;
-        let (rays, lanes) = self.object_rays(object, transformed, &fan.rays, active, &mut local);
-        // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
-        let packet = unsafe {
-            crate::avx2_packet::occluded_bvh_within(&bvh.nodes, &bvh.tris, rays, lanes, FAN_MAX_SPREAD)
-        };
-        Some(packet.unwrap_or_else(|| self.occluded_packet_lanes(&fan.rays, active)))
     }
 }

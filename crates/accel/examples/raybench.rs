@@ -1,15 +1,19 @@
 //! Ray throughput from the command line, until `filtrace bench rays` is wired:
 //!
 //! `cargo run --release -p filtrace-accel --example raybench -- SCENE [--rays N] [--res WxH]
-//!  [--threads T] [--repeats K] [--split B] [--json] [--write-obj PATH]`
+//!  [--threads T] [--repeats K] [--split B] [--qnodes N] [--json] [--write-obj PATH]`
 //!
 //! `SCENE` is a scene file or built-in name (`filtrace_scene::load_scene`) or
 //! `sphere:N` for `testmesh::displaced_sphere(N, 0.1)` (`sphere:150` has 270k triangles)
-//! or `blades:N` for `testmesh::thin_blades(N, 1)`; `--split B` sets
-//! `BuildParams::split_budget` (pre-splitting of long thin triangles).
+//! or `blades:N` for `testmesh::thin_blades(N, 1)` or `grass:N` for the dense grass with
+//! N blades (`grass:220000` is the suite's grass-1m); `--split B` sets
+//! `BuildParams::split_budget` (pre-splitting of long thin triangles), `--qnodes N`
+//! `BuildParams::min_quantized_triangles` (compressed 8-wide nodes from N triangles; `max`:
+//! never).
 //! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
 
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
+use filtrace_scene::builtin::{grass_with, GrassParams};
 use filtrace_scene::Scene;
 use std::io::Write;
 
@@ -36,13 +40,26 @@ fn main() -> Result<(), String> {
             "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,
             "--block" => opts.build.leaf_block = val()?.parse().map_err(|e| format!("--block: {e}"))?,
             "--split" => opts.build.split_budget = val()?.parse().map_err(|e| format!("--split: {e}"))?,
+            "--qnodes" => {
+                let v = val()?;
+                opts.build.min_quantized_triangles =
+                    if v == "max" { usize::MAX } else { v.parse().map_err(|e| format!("--qnodes: {e}"))? };
+            }
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),
         }
     }
     let spec = spec.ok_or("usage: raybench SCENE [options]")?;
-    let scene = filtrace_accel::bench::bench_scene(&spec)?;
+    let scene = match spec.strip_prefix("grass:") {
+        // `grass:220000` is the suite's grass-1m (`filtrace bench suite`).
+        Some(n) => {
+            let blades = n.parse().map_err(|e| format!("grass:N: {e}"))?;
+            let p = GrassParams { blades, ..GrassParams::dense() };
+            grass_with(&p).map_err(|e| e.to_string())?
+        }
+        None => filtrace_accel::bench::bench_scene(&spec)?,
+    };
     if let Some(path) = write_obj {
         write_world_obj(&scene, &path).map_err(|e| format!("{path}: {e}"))?;
     }

@@ -41,12 +41,12 @@ use std::mem::MaybeUninit;
 /// slab plane is inside that slab and a ray outside it is culled).
 #[derive(Clone, Copy)]
 pub(crate) struct RayBoxes8 {
-    inv: [__m256; 3],
+    pub inv: [__m256; 3],
     /// `o inv + e` (near planes) and `o inv - e` (far planes).
-    oinv_near: [__m256; 3],
-    oinv_far: [__m256; 3],
-    near: [usize; 3],
-    far: [usize; 3],
+    pub oinv_near: [__m256; 3],
+    pub oinv_far: [__m256; 3],
+    pub near: [usize; 3],
+    pub far: [usize; 3],
 }
 
 impl RayBoxes8 {
@@ -77,7 +77,7 @@ impl RayBoxes8 {
 /// Slab test of a ray against the eight child boxes of `n`: hit mask (bit `i` for child
 /// `i`) and entry distances.
 #[inline(always)]
-unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+pub(crate) unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
     let b = n.bounds.as_ptr() as *const f32;
     // SAFETY: `Node8` is 64-byte aligned and its bound rows are 32 bytes, so every row is
     // 32-byte aligned; the row offsets are `8 * row` with `row < 6`.
@@ -120,10 +120,10 @@ unsafe fn sort_layer<const LOW: i32>(x: __m256i, perm: [i32; 8]) -> __m256i {
 /// 3 mantissa bits only changes the visiting order of nearly equal children, and closest
 /// hits do not depend on the order (the tie rule).
 #[inline(always)]
-unsafe fn push_sorted8(
+pub(crate) unsafe fn push_sorted8<N: Children8>(
     mask: u32,
     tn: __m256,
-    node: &Node8,
+    node: &N,
     stack: &mut [MaybeUninit<Entry>],
     sp: &mut usize,
 ) -> Entry {
@@ -152,7 +152,7 @@ unsafe fn push_sorted8(
     }
     let e = |key: i32| {
         let i = 7 - (key & 7) as usize;
-        Entry { child: node.child[i], count: node.count[i], t: t.0[i] }
+        node.entry(i, t.0[i])
     };
     let n = mask.count_ones() as usize;
     debug_assert!(*sp + n <= stack.len(), "BVH deeper than MAX_DEPTH");
@@ -161,6 +161,20 @@ unsafe fn push_sorted8(
         *sp += 1;
     }
     e(k[0])
+}
+
+/// The child references of an 8-wide node ([`Node8`], `qwide::QNode8`), for
+/// [`push_sorted8`].
+pub(crate) trait Children8 {
+    /// The stack entry of child `i` entered at distance `t`.
+    fn entry(&self, i: usize, t: f32) -> Entry;
+}
+
+impl Children8 for Node8 {
+    #[inline(always)]
+    fn entry(&self, i: usize, t: f32) -> Entry {
+        Entry { child: self.child[i], count: self.count[i], t }
+    }
 }
 
 /// Eight 32-byte aligned floats (stored by one aligned store, read back one at a time).

@@ -8,6 +8,7 @@
 use crate::child_order::{self, Odds};
 use crate::flat_blas::{padded_boxes, FlatBlas};
 use crate::presplit::{self, presplit};
+use crate::qwide::{self, QBvh8};
 use crate::tri4::{self, Ray4, Tri4, TriPackets};
 use crate::triangle::WatertightRay;
 use crate::wide::{self, RayBoxes, WideNode};
@@ -33,6 +34,8 @@ pub(crate) enum Blas {
     Bvh4(WideBvh<4>),
     /// Eight-wide nodes tested with AVX2 ([`Simd::Avx2`]).
     Bvh8(WideBvh<8>),
+    /// The same eight-wide tree with compressed nodes ([`BuildParams::min_quantized_triangles`]).
+    QBvh8(QBvh8),
 }
 
 /// A wide BVH over triangle packets: leaves are ranges of `tris.packets`.
@@ -90,7 +93,13 @@ impl Blas {
             // over blocks of 4; bunny +2-4 %).
             Simd::Avx2 => {
                 let params = BuildParams { leaf_block: 2 * params.leaf_block, ..params.clone() };
-                WideBvh::build(&ref_ids, tri_count, &boxes, tri, &params).map_or(Blas::Empty, Blas::Bvh8)
+                let Some(bvh) = WideBvh::build(&ref_ids, tri_count, &boxes, tri, &params) else {
+                    return Blas::Empty;
+                };
+                if tri_count < params.min_quantized_triangles {
+                    return Blas::Bvh8(bvh);
+                }
+                QBvh8::compress(bvh).map_or_else(Blas::Bvh8, Blas::QBvh8)
             }
         }
     }
@@ -102,6 +111,7 @@ impl Blas {
             Blas::Flat(f) => Some(&f.tris),
             Blas::Bvh4(b) => Some(&b.tris),
             Blas::Bvh8(b) => Some(&b.tris),
+            Blas::QBvh8(b) => Some(&b.tris),
         }
     }
 
@@ -131,6 +141,9 @@ impl Blas {
             // SAFETY: `SceneAccel` builds 8-wide nodes only where AVX2 is available.
             Blas::Bvh8(b) => unsafe { b.intersect8(o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
+            // SAFETY: as for `Bvh8`.
+            Blas::QBvh8(b) => unsafe { b.intersect8(o, d, t_min, t_max) },
+            #[cfg(target_arch = "x86_64")]
             // SAFETY: `AVX2` queries run only where AVX2 is available.
             Blas::Flat(f) if AVX2 => unsafe { f.intersect8(o, d, t_min, t_max) },
             Blas::Flat(f) => f.intersect4(o, d, t_min, t_max),
@@ -145,6 +158,9 @@ impl Blas {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as in `intersect`.
             Blas::Bvh8(b) => unsafe { b.occluded8(o, d, t_min, t_max) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as in `intersect`.
+            Blas::QBvh8(b) => unsafe { b.occluded8(o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as in `intersect`.
             Blas::Flat(f) if AVX2 => unsafe { f.occluded8(o, d, t_min, t_max) },
@@ -166,6 +182,7 @@ impl Blas {
             }
             Blas::Bvh4(b) => b.odds,
             Blas::Bvh8(b) => b.odds,
+            Blas::QBvh8(b) => b.odds,
         }
     }
 
@@ -174,6 +191,7 @@ impl Blas {
         match self {
             Blas::Bvh4(b) => b.nodes.len(),
             Blas::Bvh8(b) => b.nodes.len(),
+            Blas::QBvh8(b) => b.nodes.len(),
             _ => 0,
         }
     }
@@ -183,6 +201,7 @@ impl Blas {
         match self {
             Blas::Bvh4(b) => sah_cost_of(&b.nodes),
             Blas::Bvh8(b) => sah_cost_of(&b.nodes),
+            Blas::QBvh8(b) => sah_cost_of(&b.decoded()),
             _ => 0.0,
         }
     }
@@ -190,7 +209,9 @@ impl Blas {
     /// Leaves: wide-node children that hold triangles (0 for the flat and empty layouts).
     pub(crate) fn leaf_count(&self) -> usize {
         match self {
-            Blas::Bvh4(_) | Blas::Bvh8(_) => self.leaves().iter().filter(|&&(_, c)| c > 0).count(),
+            Blas::Bvh4(_) | Blas::Bvh8(_) | Blas::QBvh8(_) => {
+                self.leaves().iter().filter(|&&(_, c)| c > 0).count()
+            }
             _ => 0,
         }
     }
@@ -206,6 +227,7 @@ impl Blas {
             Blas::Flat(f) => of(&f.node.first, &f.node.count),
             Blas::Bvh4(b) => b.nodes.iter().flat_map(|n| of(&n.child, &n.count)).collect(),
             Blas::Bvh8(b) => b.nodes.iter().flat_map(|n| of(&n.child, &n.count)).collect(),
+            Blas::QBvh8(b) => b.decoded().iter().flat_map(|n| of(&n.child, &n.count)).collect(),
         }
     }
 
@@ -231,6 +253,10 @@ impl Blas {
             Blas::Bvh8(b) => {
                 wide::validate(&b.nodes, tris.packets.len(), whole_box)?;
                 split_coverage(&b.nodes, tris, &copies)?;
+            }
+            Blas::QBvh8(b) => {
+                qwide::validate(&b.nodes, tris.packets.len(), whole_box)?;
+                split_coverage(&b.decoded(), tris, &copies)?;
             }
             _ => {}
         }

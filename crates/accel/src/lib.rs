@@ -96,6 +96,9 @@ mod packet;
 #[cfg(target_arch = "x86_64")]
 mod packet_two_level;
 mod presplit;
+mod qwide;
+#[cfg(target_arch = "x86_64")]
+mod qwide_avx2;
 mod ray_packet;
 mod refit;
 pub mod sah;
@@ -163,6 +166,9 @@ impl Simd {
 pub struct BvhStats {
     /// Wide nodes of all bottom levels.
     pub nodes: usize,
+    /// Of these, compressed 8-wide nodes (128 bytes; the others take 256 bytes if 8-wide,
+    /// 128 if 4-wide; [`BuildParams::min_quantized_triangles`]).
+    pub compressed_nodes: usize,
     /// Leaves (wide-node children that hold triangles).
     pub leaves: usize,
     /// Four-triangle packets; `triangles / (4 packets)` is the lane occupancy.
@@ -494,6 +500,7 @@ impl SceneAccel {
         let mut st = BvhStats { top_level_nodes: self.tlas.len(), ..BvhStats::default() };
         for b in self.blas.iter().chain([&self.merged]) {
             st.nodes += b.node_count();
+            st.compressed_nodes += if matches!(b, Blas::QBvh8(_)) { b.node_count() } else { 0 };
             st.packets += b.tris().map_or(0, |t| t.packets.len());
             st.triangles += b.tri_count();
             st.references += b.tris().map_or(0, |t| t.prim_ids.iter().filter(|&&id| id != u32::MAX).count());

@@ -49,6 +49,11 @@ pub struct BuildParams {
     /// the box of a clipped piece of a triangle whose box is much larger than it; leaves
     /// may then reference a triangle more than once. 0 turns it off.
     pub split_budget: f32,
+    /// Bottom levels of at least this many triangles built for the AVX2 kernels get
+    /// compressed 8-wide nodes (`qwide.rs`: child boxes as 8-bit grid offsets, 128 bytes a
+    /// node instead of 256); 0: every BVH, `usize::MAX`: none. The presets use
+    /// [`MIN_QUANTIZED_TRIANGLES`].
+    pub min_quantized_triangles: usize,
 }
 
 /// Extra references the presets allow for split triangles (a fraction of the triangles):
@@ -58,6 +63,10 @@ pub struct BuildParams {
 /// (`testmesh::thin_blades`: SAH -13 %, closest hits +17 %), see `docs/perf-accel.md`
 /// "Stop 15".
 const SPLIT_BUDGET: f32 = 0.0;
+
+/// Smallest bottom level given compressed nodes by the presets
+/// ([`BuildParams::min_quantized_triangles`]). To be measured.
+pub const MIN_QUANTIZED_TRIANGLES: usize = usize::MAX;
 
 impl BuildParams {
     /// Fewest bins: fastest build, slightly slower traversal.
@@ -71,6 +80,7 @@ impl BuildParams {
             parallel_threshold: 4096,
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
+            min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
         }
     }
 
@@ -85,6 +95,7 @@ impl BuildParams {
             parallel_threshold: 4096,
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
+            min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
         }
     }
 
@@ -99,6 +110,7 @@ impl BuildParams {
             parallel_threshold: 4096,
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
+            min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
         }
     }
 

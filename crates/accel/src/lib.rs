@@ -31,6 +31,9 @@
 //! test, and leaves are tested two packets (eight triangles) at a time, bit-identical to
 //! the scalar test (`avx2.rs`). The SSE BVH4 stays as the path for other CPUs;
 //! [`SceneAccel::build_simd`] picks either kernel explicitly (tests run both). Bottom
+//! levels of at least [`BuildParams::min_quantized_triangles`] (2 M) triangles get
+//! **compressed 8-wide nodes** (`qwide.rs`: child boxes as 8-bit offsets in a per-node
+//! grid, rounded outwards; half the node memory; Ylitie et al. 2017). Bottom
 //! levels of at most [`BuildParams::max_flat_triangles`] (40) triangles (the Cornell box) get
 //! no hierarchy: their triangles fall into a few groups (SAH-clustered: walls, blocks and
 //! light of the Cornell box apart) whose padded boxes are tested before the triangles

@@ -274,6 +274,13 @@ mod tests {
         }
     }
 
+    /// Two cache lines a node (half of `Node8`'s four).
+    #[test]
+    fn a_node_is_two_cache_lines() {
+        assert_eq!(std::mem::size_of::<QNode8>(), 128);
+        assert_eq!(std::mem::size_of::<Node8>(), 256);
+    }
+
     /// The grid is tight: a box spanning the whole node decodes to the node's box (up to
     /// one step), and a child of a large node costs at most one step per side.
     #[test]

@@ -65,8 +65,12 @@ pub struct BuildParams {
 const SPLIT_BUDGET: f32 = 0.0;
 
 /// Smallest bottom level given compressed nodes by the presets
-/// ([`BuildParams::min_quantized_triangles`]). To be measured.
-pub const MIN_QUANTIZED_TRIANGLES: usize = usize::MAX;
+/// ([`BuildParams::min_quantized_triangles`]): 2 M triangles. Incoherent closest hits, 1
+/// thread, compressed vs uncompressed (`raybench grass:N --qnodes`, loaded machine,
+/// `docs/perf-accel.md` "Stop 16"): grass 2 M and 3.3 M triangles +5 %, grass-1m even (its
+/// 12 MB of nodes fit the L3; its triangles do not), 56k-82k meshes -1..-7 %, and a single
+/// compressed mesh loses the 8-ray packet traversal of camera tiles.
+pub const MIN_QUANTIZED_TRIANGLES: usize = 2_000_000;
 
 impl BuildParams {
     /// Fewest bins: fastest build, slightly slower traversal.

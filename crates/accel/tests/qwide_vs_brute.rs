@@ -19,10 +19,9 @@ fn single(mesh: Mesh) -> Scene {
     s
 }
 
-/// `params` with every AVX2 BVH compressed (0) or none (`usize::MAX`).
-fn with_compression(params: &BuildParams, compressed: bool) -> BuildParams {
-    let min_quantized_triangles = if compressed { 0 } else { usize::MAX };
-    BuildParams { min_quantized_triangles, ..params.clone() }
+/// `params` with every AVX2 BVH compressed.
+fn compress_all(params: &BuildParams) -> BuildParams {
+    BuildParams { min_quantized_triangles: 0, ..params.clone() }
 }
 
 /// The AVX2 BVH of `scene` with compressed nodes, checked to have them; `None` (with a
@@ -32,7 +31,7 @@ fn compressed(scene: &Scene, params: &BuildParams) -> Option<SceneAccel> {
         println!("SKIPPED: compressed nodes are built for the AVX2 kernels only (no AVX2 on this CPU)");
         return None;
     }
-    let accel = SceneAccel::build_simd(scene, &with_compression(params, true), Simd::Avx2);
+    let accel = SceneAccel::build_simd(scene, &compress_all(params), Simd::Avx2);
     let st = accel.stats();
     assert!(st.nodes > 0 && st.compressed_nodes == st.nodes, "{st:?}");
     accel.validate().unwrap_or_else(|e| panic!("{e}"));
@@ -138,27 +137,25 @@ fn instances_match_brute_force() {
         println!("SKIPPED: no AVX2 on this CPU");
         return;
     }
-    let accel = SceneAccel::build_with_moving(
-        &s,
-        &with_compression(&BuildParams::default(), true),
-        Simd::Avx2,
-        &moving,
-    );
+    let accel =
+        SceneAccel::build_with_moving(&s, &compress_all(&BuildParams::default()), Simd::Avx2, &moving);
     assert!(accel.stats().compressed_nodes > 0);
     let rays = rays_with_surface_origins(&s, &brute, 3000, 14);
     check_against_brute(&accel, &brute, &rays, "instances");
 }
 
 /// The compressed and uncompressed 8-wide BVHs of a 1M-triangle mesh give the same hits on
-/// many rays (bit for bit), and brute force agrees on a few.
+/// many rays (bit for bit), and brute force agrees on a few. (The presets leave a mesh
+/// of this size uncompressed: `MIN_QUANTIZED_TRIANGLES`.)
 #[test]
 #[ignore = "slow: builds a 1M-triangle mesh twice and shoots brute-force rays at it"]
 fn million_triangles_match_the_uncompressed_bvh() {
     let scene = single(testmesh::displaced_sphere(290, 0.1));
     assert!(scene.triangle_count() > 1_000_000);
+    assert!(scene.triangle_count() < filtrace_accel::sah::MIN_QUANTIZED_TRIANGLES);
     let Some(accel) = compressed(&scene, &BuildParams::default()) else { return };
-    let plain = SceneAccel::build_simd(&scene, &with_compression(&BuildParams::default(), false), Simd::Avx2);
-    assert_eq!(plain.stats().compressed_nodes, 0);
+    let plain = SceneAccel::build_simd(&scene, &BuildParams::default(), Simd::Avx2);
+    assert_eq!(plain.stats().compressed_nodes, 0, "the presets compress from 2 M triangles");
     for ray in random_rays(&scene, 40_000, 15) {
         assert_eq!(bits(accel.intersect(&ray)), bits(plain.intersect(&ray)), "ray {ray:?}");
         assert_eq!(accel.occluded(&ray), plain.occluded(&ray), "ray {ray:?}");

@@ -268,13 +268,18 @@ impl KdTree {
                 Child::Inner(n) => {
                     let node = &self.inner[n as usize];
                     let [dl, dr] = child_bounds(node, &q.rows);
-                    // Push the farther child first so the nearer one is searched first.
+                    // Push the farther child first so the nearer one is searched first; a
+                    // child already beyond the k-th distance is not pushed at all (NaN: kept).
                     let [left, right] = node.children;
                     let (near, far) =
                         if dl <= dr { ((left, dl), (right, dr)) } else { ((right, dr), (left, dl)) };
-                    stack[depth] = far;
-                    stack[depth + 1] = near;
-                    depth += 2;
+                    let kth = if out.len == k { out.items[k - 1].0 } else { f32::INFINITY };
+                    for child in [far, near] {
+                        if !(child.1 > kth) {
+                            stack[depth] = child;
+                            depth += 1;
+                        }
+                    }
                 }
             }
         }

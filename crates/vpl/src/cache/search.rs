@@ -8,15 +8,26 @@
 //! bound of `d`, so the search is exact (tested against brute force). The thesis's
 //! screen-space grid missed records near the camera or cost 10 ms (6.1); this has
 //! neither problem and does not depend on the camera.
+//!
+//! Layout for lanes: a leaf holds its (up to 8) points in structure-of-arrays form, so
+//! one pass of lane-wise arithmetic gives all their distances, and an inner node holds its
+//! two children's boxes so that one 4-lane pass gives both lower bounds. The lane loops
+//! are plain `f32` arithmetic in the scalar formula's order (Rust never contracts into
+//! FMAs), compiled once for the baseline and once for AVX2 + FMA after
+//! [`filtrace_core::cpu::isa`]: both give the bits of [`cache_distance`].
 
+use filtrace_core::cpu::{isa, Isa};
 use filtrace_core::Vec3;
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Most records a shading point interpolates (M).
 pub const MAX_NEIGHBOURS: usize = 4;
-/// Points per kd-tree leaf.
+/// Points per kd-tree leaf: one 8-lane block (the median split leaves 4 to 8).
 const LEAF_SIZE: usize = 8;
+/// Lower bounds are shrunk by this factor: the exact distances are computed another way
+/// (rounding).
+const BOUND_SLACK: f32 = 1.0 - 1e-5;
 
 /// Ids of built trees (see `KdTree::id`).
 static NEXT_TREE_ID: AtomicU64 = AtomicU64::new(1);
@@ -44,17 +55,38 @@ pub(crate) fn unit_or_z(n: Vec3) -> Vec3 {
     }
 }
 
-#[derive(Clone, Debug)]
-enum NodeKind {
-    Leaf { start: u32, end: u32 },
-    Inner { left: u32, right: u32 },
+/// A subtree: a leaf block or an inner node (indices into their arrays).
+#[derive(Clone, Copy, Debug)]
+enum Child {
+    Leaf(u32),
+    Inner(u32),
 }
 
+/// Up to [`LEAF_SIZE`] points as lanes: rows x, y, z of the positions and of the unit
+/// normals; lanes past `len` repeat lane 0 (computed, never inserted).
 #[derive(Clone, Debug)]
-struct Node {
-    lo: [f32; 6],
-    hi: [f32; 6],
-    kind: NodeKind,
+struct Leaf {
+    p: [[f32; LEAF_SIZE]; 3],
+    n: [[f32; LEAF_SIZE]; 3],
+    ids: [u32; LEAF_SIZE],
+    len: u32,
+}
+
+/// An inner node: its children's 6D boxes as 4 lanes `(left x, left μn, right x, right
+/// μn)`, row `i` holding axis `i` of each 3D half.
+#[derive(Clone, Debug)]
+struct Inner {
+    lo: [[f32; 4]; 3],
+    hi: [[f32; 4]; 3],
+    children: [Child; 2],
+}
+
+/// A query in the layouts of the nodes and leaves.
+struct Query {
+    position: Vec3,
+    normal: Vec3,
+    /// Row `i`: `(x_i, μ n_i, x_i, μ n_i)`, the lanes of [`Inner`].
+    rows: [[f32; 4]; 3],
 }
 
 /// A kd-tree over `(position, unit normal)` points answering k-nearest queries under
@@ -66,9 +98,9 @@ pub struct KdTree {
     id: u64,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
-    /// Point indices, permuted so each leaf owns a contiguous range.
-    order: Vec<u32>,
-    nodes: Vec<Node>,
+    root: Option<Child>,
+    inner: Vec<Inner>,
+    leaves: Vec<Leaf>,
     lambda: f32,
 }
 
@@ -77,18 +109,25 @@ impl KdTree {
     pub fn new(positions: &[Vec3], normals: &[Vec3], lambda: f32) -> Self {
         assert_eq!(positions.len(), normals.len(), "one normal per position");
         let normals: Vec<Vec3> = normals.iter().map(|&n| unit_or_z(n)).collect();
+        let mu = lambda * std::f32::consts::FRAC_1_SQRT_2;
+        let keys: Vec<[f32; 6]> = positions
+            .iter()
+            .zip(&normals)
+            .map(|(p, n)| {
+                let m = *n * mu;
+                [p.x, p.y, p.z, m.x, m.y, m.z]
+            })
+            .collect();
         let mut tree = KdTree {
             id: NEXT_TREE_ID.fetch_add(1, Ordering::Relaxed),
             positions: positions.to_vec(),
             normals,
-            order: (0..positions.len() as u32).collect(),
-            nodes: Vec::new(),
             lambda,
+            ..KdTree::default()
         };
         if !positions.is_empty() {
-            let mut order = std::mem::take(&mut tree.order);
-            tree.build(&mut order, 0);
-            tree.order = order;
+            let mut ids: Vec<u32> = (0..positions.len() as u32).collect();
+            tree.root = Some(tree.build(&mut ids, &keys).0);
         }
         tree
     }
@@ -106,112 +145,144 @@ impl KdTree {
         self.lambda
     }
 
-    /// The 6D key `(x, μ n)` of point `i`.
-    fn key(&self, i: u32) -> [f32; 6] {
-        let (p, n) = (self.positions[i as usize], self.normals[i as usize] * self.mu());
-        [p.x, p.y, p.z, n.x, n.y, n.z]
-    }
-
-    fn mu(&self) -> f32 {
-        self.lambda * std::f32::consts::FRAC_1_SQRT_2
-    }
-
-    /// Builds the subtree over `ids` (whose first element sits at `offset` in `order`).
-    fn build(&mut self, ids: &mut [u32], offset: usize) -> u32 {
+    /// Builds the subtree over `ids`; returns it with its 6D box.
+    fn build(&mut self, ids: &mut [u32], keys: &[[f32; 6]]) -> (Child, [f32; 6], [f32; 6]) {
         let (mut lo, mut hi) = ([f32::INFINITY; 6], [f32::NEG_INFINITY; 6]);
         for &i in ids.iter() {
-            let k = self.key(i);
             for a in 0..6 {
-                lo[a] = lo[a].min(k[a]);
-                hi[a] = hi[a].max(k[a]);
+                lo[a] = lo[a].min(keys[i as usize][a]);
+                hi[a] = hi[a].max(keys[i as usize][a]);
             }
         }
-        let index = self.nodes.len() as u32;
-        let range = NodeKind::Leaf { start: offset as u32, end: (offset + ids.len()) as u32 };
-        self.nodes.push(Node { lo, hi, kind: range });
         if ids.len() <= LEAF_SIZE {
-            return index;
+            self.leaves.push(self.leaf(ids));
+            return (Child::Leaf(self.leaves.len() as u32 - 1), lo, hi);
         }
         // Split the widest axis at the median (ties by index: deterministic).
         let axis = (0..6).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
         let mid = ids.len() / 2;
         ids.select_nth_unstable_by(mid, |&a, &b| {
-            self.key(a)[axis].total_cmp(&self.key(b)[axis]).then(a.cmp(&b))
+            keys[a as usize][axis].total_cmp(&keys[b as usize][axis]).then(a.cmp(&b))
         });
         let (left_ids, right_ids) = ids.split_at_mut(mid);
-        let left = self.build(left_ids, offset);
-        let right = self.build(right_ids, offset + mid);
-        self.nodes[index as usize].kind = NodeKind::Inner { left, right };
-        index
+        let (left, llo, lhi) = self.build(left_ids, keys);
+        let (right, rlo, rhi) = self.build(right_ids, keys);
+        let mut node = Inner { lo: [[0.0; 4]; 3], hi: [[0.0; 4]; 3], children: [left, right] };
+        for (c, (clo, chi)) in [(llo, lhi), (rlo, rhi)].into_iter().enumerate() {
+            for half in 0..2 {
+                for i in 0..3 {
+                    node.lo[i][2 * c + half] = clo[3 * half + i];
+                    node.hi[i][2 * c + half] = chi[3 * half + i];
+                }
+            }
+        }
+        self.inner.push(node);
+        (Child::Inner(self.inner.len() as u32 - 1), lo, hi)
     }
 
-    /// Lower bound of `d` from the query to any point of node `n`.
-    fn lower_bound(&self, n: &Node, q: &[f32; 6]) -> f32 {
-        let box_distance = |axes: std::ops::Range<usize>| {
-            let mut s = 0.0f32;
-            for a in axes {
-                let e = (n.lo[a] - q[a]).max(q[a] - n.hi[a]).max(0.0);
-                s += e * e;
+    /// The lanes of the points `ids` (at most [`LEAF_SIZE`]).
+    fn leaf(&self, ids: &[u32]) -> Leaf {
+        let mut leaf =
+            Leaf { p: [[0.0; LEAF_SIZE]; 3], n: [[0.0; LEAF_SIZE]; 3], ids: [ids[0]; LEAF_SIZE], len: 0 };
+        for lane in 0..LEAF_SIZE {
+            let i = ids.get(lane).copied().unwrap_or(ids[0]);
+            let (p, n) = (self.positions[i as usize], self.normals[i as usize]);
+            for (a, (pa, na)) in [(p.x, n.x), (p.y, n.y), (p.z, n.z)].into_iter().enumerate() {
+                leaf.p[a][lane] = pa;
+                leaf.n[a][lane] = na;
             }
-            s.sqrt()
-        };
-        // Slack for rounding: the exact distance of the points is computed another way.
-        (box_distance(0..3) + box_distance(3..6)) * (1.0 - 1e-5)
+            leaf.ids[lane] = i;
+        }
+        leaf.len = ids.len() as u32;
+        leaf
     }
 
     /// The `k` nearest points to `(position, normal)` under [`cache_distance`] as
     /// `(distance, index)`, nearest first; ties by lower index (as a brute-force sort by
     /// `(distance, index)`). `k` is clamped to [`MAX_NEIGHBOURS`] + 1.
+    #[inline]
     pub fn nearest(&self, position: Vec3, normal: Vec3, k: usize) -> Nearest {
+        self.nearest_with(isa(), position, normal, k)
+    }
+
+    /// [`KdTree::nearest`] with the lane code of instruction set `level` (at most what
+    /// this CPU runs; tests compare the levels).
+    pub fn nearest_with(&self, level: Isa, position: Vec3, normal: Vec3, k: usize) -> Nearest {
         let mut out = Nearest::default();
         let k = k.min(MAX_NEIGHBOURS + 1);
         if self.is_empty() || k == 0 || !position.is_finite() {
             return out;
         }
         let normal = unit_or_z(normal);
-        let m = normal * self.mu();
-        let q = [position.x, position.y, position.z, m.x, m.y, m.z];
+        let m = normal * (self.lambda * std::f32::consts::FRAC_1_SQRT_2);
+        let p = position;
+        let rows = [[p.x, m.x, p.x, m.x], [p.y, m.y, p.y, m.y], [p.z, m.z, p.z, m.z]];
+        let q = Query { position, normal, rows };
         self.warm_start(position, normal, k, &mut out);
-        // Entries: node and the lower bound of `d` over it (0 for the root).
-        let mut stack = [(0u32, 0.0f32); 64];
+        #[cfg(target_arch = "x86_64")]
+        if level.has_avx2() && isa().has_avx2() {
+            // SAFETY: the CPU runs AVX2 and FMA (checked just above).
+            unsafe { self.search_avx2(&q, k, &mut out) };
+            LAST_QUERY.with(|last| last.set((self.id, out)));
+            return out;
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = level;
+        self.search(&q, k, &mut out);
+        LAST_QUERY.with(|last| last.set((self.id, out)));
+        out
+    }
+
+    /// [`KdTree::search`] compiled for AVX2 + FMA (the same source; only the instruction
+    /// selection differs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn search_avx2(&self, q: &Query, k: usize, out: &mut Nearest) {
+        self.search(q, k, out)
+    }
+
+    /// Depth-first search, nearer child first, pruning subtrees whose lower bound
+    /// exceeds the current k-th distance.
+    #[inline(always)]
+    fn search(&self, q: &Query, k: usize, out: &mut Nearest) {
+        let Some(root) = self.root else { return };
+        // Entries: subtree and the lower bound of `d` over it (0 for the root).
+        let mut stack = [(root, 0.0f32); 64];
         let mut depth = 1;
         while depth > 0 {
             depth -= 1;
-            let (index, bound) = stack[depth];
-            let node = &self.nodes[index as usize];
+            let (child, bound) = stack[depth];
             if out.len == k && bound > out.items[k - 1].0 {
                 continue;
             }
-            match node.kind {
-                NodeKind::Leaf { start, end } => {
-                    for &i in &self.order[start as usize..end as usize] {
-                        // `d` is the distance plus a term >= 0: a point already farther
-                        // than the k-th is out without the normal term (same `d` else).
-                        let along = (position - self.positions[i as usize]).length();
-                        if out.len == k && along > out.items[k - 1].0 {
-                            continue;
+            match child {
+                Child::Leaf(b) => {
+                    let leaf = &self.leaves[b as usize];
+                    let d = leaf_distances(leaf, q, self.lambda);
+                    for (&d, &i) in d.iter().zip(&leaf.ids).take(leaf.len as usize) {
+                        if out.len < k || d <= out.items[k - 1].0 {
+                            out.insert(k, (d, i));
                         }
-                        let d = along
-                            + self.lambda * (1.0 - normal.dot(self.normals[i as usize])).max(0.0).sqrt();
-                        out.insert(k, (d, i));
                     }
                 }
-                NodeKind::Inner { left, right } => {
-                    // Push the farther child first so the nearer one is searched first.
-                    let (dl, dr) = (
-                        self.lower_bound(&self.nodes[left as usize], &q),
-                        self.lower_bound(&self.nodes[right as usize], &q),
-                    );
+                Child::Inner(n) => {
+                    let node = &self.inner[n as usize];
+                    let [dl, dr] = child_bounds(node, &q.rows);
+                    // Push the farther child first so the nearer one is searched first; a
+                    // child already beyond the k-th distance is not pushed at all (NaN: kept).
+                    let [left, right] = node.children;
                     let (near, far) =
                         if dl <= dr { ((left, dl), (right, dr)) } else { ((right, dr), (left, dl)) };
-                    stack[depth] = far;
-                    stack[depth + 1] = near;
-                    depth += 2;
+                    let kth = if out.len == k { out.items[k - 1].0 } else { f32::INFINITY };
+                    for child in [far, near] {
+                        if !(child.1 > kth) {
+                            stack[depth] = child;
+                            depth += 1;
+                        }
+                    }
                 }
             }
         }
-        LAST_QUERY.with(|last| last.set((self.id, out)));
-        out
     }
 
     /// Seeds `out` with the exact distances of the records this thread's previous query
@@ -259,6 +330,37 @@ impl KdTree {
         all.truncate(k);
         all
     }
+}
+
+/// [`cache_distance`] from the query to every lane of `leaf`, term by term in its order
+/// (glam's `dot` is `(x x' + y y') + z z'`, `length` its square root), so each lane has
+/// the scalar function's bits.
+#[inline(always)]
+fn leaf_distances(leaf: &Leaf, q: &Query, lambda: f32) -> [f32; LEAF_SIZE] {
+    let (p, n) = (q.position, q.normal);
+    let mut d = [0.0f32; LEAF_SIZE];
+    for (l, d) in d.iter_mut().enumerate() {
+        let (dx, dy, dz) = (p.x - leaf.p[0][l], p.y - leaf.p[1][l], p.z - leaf.p[2][l]);
+        let along = (dx * dx + dy * dy + dz * dz).sqrt();
+        let cos = n.x * leaf.n[0][l] + n.y * leaf.n[1][l] + n.z * leaf.n[2][l];
+        *d = along + lambda * (1.0 - cos).max(0.0).sqrt();
+    }
+    d
+}
+
+/// Lower bounds of `d` from the query to the two children of `node`: per child the
+/// distance to its position box plus that to its scaled-normal box.
+#[inline(always)]
+fn child_bounds(node: &Inner, rows: &[[f32; 4]; 3]) -> [f32; 2] {
+    let mut s = [0.0f32; 4];
+    for ((lo, hi), q) in node.lo.iter().zip(&node.hi).zip(rows) {
+        for (l, s) in s.iter_mut().enumerate() {
+            let e = (lo[l] - q[l]).max(q[l] - hi[l]).max(0.0);
+            *s += e * e;
+        }
+    }
+    let r = s.map(f32::sqrt);
+    [(r[0] + r[1]) * BOUND_SLACK, (r[2] + r[3]) * BOUND_SLACK]
 }
 
 /// The result of [`KdTree::nearest`]: up to [`MAX_NEIGHBOURS`] + 1 `(distance, index)`

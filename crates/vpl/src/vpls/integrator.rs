@@ -36,6 +36,7 @@ use filtrace_render::integrator::{
     CameraSample, FrameContext, Integrator, PassEnd, PathContext, PathParams, Split, Tile,
 };
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::Instant;
 
@@ -84,12 +85,15 @@ struct VplFrameData {
     vpls: Vpls,
     /// Records and the `optimized` parameters, which change between passes.
     cache: RwLock<Option<ImportanceCache>>,
-    /// The G-buffer's positions and shading normals (zero normal: background).
-    positions: Vec<Vec3>,
-    normals: Vec<Vec3>,
+    /// Per pixel (row-major) the d-distance to the closest record that the search of its
+    /// sample 0 (through the pixel centre) found, as `f32` bits ([`NO_DISTANCE`]: none).
+    closest: Vec<AtomicU32>,
     width: usize,
     times: StageTimes,
 }
+
+/// `closest` of a pixel whose centre sample found no record (yet).
+const NO_DISTANCE: u32 = u32::MAX;
 
 /// The `optimized` sampler's memory within a frame.
 #[derive(Default)]
@@ -156,18 +160,18 @@ impl VplIntegrator {
     }
 
     /// Per pixel the d-distance from the surface through its centre to the closest cache
-    /// record (the thesis's Figure 27); 0 for background and without a cache.
+    /// record (the thesis's Figure 27), kept from the shading's own search at the pixel's
+    /// sample 0 (the renderer's guide ray through the centre) instead of a second search;
+    /// 0 for background, without a cache, and before the first pass.
     pub fn cache_distance(&self) -> Image {
         let f = &self.frame;
-        let height = f.positions.len().checked_div(f.width).unwrap_or(0);
-        let cache = f.cache.read().unwrap_or_else(PoisonError::into_inner);
-        let dist: Vec<f32> = (0..f.positions.len())
-            .into_par_iter()
-            .map(|i| match cache.as_ref() {
-                Some(c) if f.normals[i] != Vec3::ZERO => {
-                    c.neighbours(f.positions[i], f.normals[i]).closest_distance().unwrap_or(0.0)
-                }
-                _ => 0.0,
+        let height = f.closest.len().checked_div(f.width).unwrap_or(0);
+        let dist: Vec<f32> = f
+            .closest
+            .iter()
+            .map(|d| match d.load(Ordering::Relaxed) {
+                NO_DISTANCE => 0.0,
+                bits => f32::from_bits(bits),
             })
             .collect();
         Image::from_vec(f.width, height, 1, dist).expect("one value per pixel")
@@ -178,6 +182,7 @@ impl VplIntegrator {
     }
 
     /// One camera sample with the cache's sampler; its draws' feedback goes to `feedback`.
+    /// Also the d-distance to the closest record its search found (`None` without one).
     fn shade(
         &self,
         cache: Option<&ImportanceCache>,
@@ -186,18 +191,16 @@ impl VplIntegrator {
         sampler: &mut Sampler,
         want: bool,
         mut feedback: Option<&mut Vec<SampleFeedback>>,
-    ) -> CameraSample {
+    ) -> (CameraSample, Option<f32>) {
         let vpls = &self.frame.vpls;
         let (Some(cache), false) = (cache, self.settings.ground_truth) else {
             let (radiance, surface) = exhaustive_pixel(ctx, vpls, ray);
-            return CameraSample { radiance, surface: want.then_some(surface) };
+            return (CameraSample { radiance, surface: want.then_some(surface) }, None);
         };
         let Some(si) = ctx.intersect(ray) else {
             let direct = ctx.lights.environment_radiance(ray.dir);
-            return CameraSample {
-                radiance: Split { direct, indirect: Rgb::ZERO },
-                surface: want.then(Default::default),
-            };
+            let radiance = Split { direct, indirect: Rgb::ZERO };
+            return (CameraSample { radiance, surface: want.then(Default::default) }, None);
         };
         let rx = Receiver::new(si, ctx.bsdf(&si));
         let nb = cache.neighbours(si.p, si.n_s);
@@ -220,7 +223,8 @@ impl VplIntegrator {
                 fb.extend(plan.feedback(i, c));
             }
         }
-        CameraSample { radiance: l, surface: want.then(|| visible_surface(ctx, &si)) }
+        let sample = CameraSample { radiance: l, surface: want.then(|| visible_surface(ctx, &si)) };
+        (sample, nb.closest_distance())
     }
 }
 
@@ -249,18 +253,29 @@ impl Integrator for VplIntegrator {
         want: bool,
     ) -> CameraSample {
         let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
-        self.shade(cache.as_ref(), ctx, ray, sampler, want, None)
+        self.shade(cache.as_ref(), ctx, ray, sampler, want, None).0
     }
 
     /// The default tile loop with the cache locked once per tile and, for `optimized`, the
-    /// tile's feedback handed over at its end.
+    /// tile's feedback handed over at its end. Sample 0's closest record distance is kept
+    /// for `cache_distance`.
     fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
         let learn = self.learns();
         let mut feedback = Vec::new();
+        // `trace_tile` takes the pixels in order, each pixel's samples in a row.
+        let per_pixel = (tile.end - tile.first).max(1) as usize;
+        let mut calls = 0usize;
         let done = {
             let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
             trace_tile(tile, pixels, |ray, sampler, want| {
-                self.shade(cache.as_ref(), &tile.ctx, ray, sampler, want, learn.then_some(&mut feedback))
+                let pixel = tile.y0 * tile.width + calls / per_pixel;
+                calls += 1;
+                let fb = learn.then_some(&mut feedback);
+                let (sample, closest) = self.shade(cache.as_ref(), &tile.ctx, ray, sampler, want, fb);
+                if let (true, Some(d), Some(slot)) = (want, closest, self.frame.closest.get(pixel)) {
+                    slot.store(d.to_bits(), Ordering::Relaxed);
+                }
+                sample
             })
         };
         // The cache's lock is released first: `end_pass` takes the two the other way round.
@@ -318,7 +333,8 @@ fn prepare_frame(
         build_cache(settings, frame, &vpls, &view, &receivers, previous)
     });
     times.cache_ms = ms(t);
-    VplFrameData { vpls, cache: RwLock::new(cache), positions, normals, width, times }
+    let closest = (0..positions.len()).map(|_| AtomicU32::new(NO_DISTANCE)).collect();
+    VplFrameData { vpls, cache: RwLock::new(cache), closest, width, times }
 }
 
 /// The seed of a frame's VPLs: the VPL seed plus the render's seed, decorrelated per frame
@@ -366,4 +382,45 @@ fn build_cache(
     let set = SceneVpls { ctx: frame.ctx, vpls, receivers };
     let diagonal = frame.ctx.scene.bounds().extent().length();
     ImportanceCache::build(&set, points, diagonal, &settings.cache, previous).unwrap_or_else(|_| empty())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vpls::render_vpl_frame;
+    use filtrace_render::{RenderSettings, Renderer};
+    use std::sync::atomic::AtomicBool;
+
+    /// The d-distance layer kept from the shading's searches is the layer's definition, a
+    /// search of its own through every pixel centre, bit for bit, whatever the spp.
+    #[test]
+    fn cache_distance_layer_equals_a_search_through_each_pixel_centre() {
+        let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
+        let (w, h) = (24u32, 20u32);
+        let settings = RenderSettings { width: w, height: h, spp: 1, max_depth: 8, seed: 3 };
+        let mut r = Renderer::new(scene, settings).expect("settings");
+        for (sampler, spp) in [(SamplerKind::Balance, 1), (SamplerKind::Optimized, 3)] {
+            let vs = VplSettings {
+                vpls: VplParams { count: 128, direct: 16, ..VplParams::thesis() },
+                sampler,
+                cache: CacheParams { cache_points: 40, ..CacheParams::default() },
+                ground_truth: false,
+            };
+            let frame = render_vpl_frame(&mut r, &vs, spp, &AtomicBool::new(false)).unwrap().unwrap();
+            let cache = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
+            let (ctx, layer) = (r.context(), frame.cache_distance);
+            assert_eq!((layer.width(), layer.height()), (w as usize, h as usize));
+            let mut hits = 0;
+            for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
+                let ray = r.camera().generate_ray(x, y, Vec2::splat(0.5));
+                let want = ctx.intersect(&ray).map_or(0.0, |si| {
+                    hits += 1;
+                    cache.neighbours(si.p, si.n_s).closest_distance().expect("records")
+                });
+                let got = layer.pixel(x as usize, y as usize)[0];
+                assert_eq!(got.to_bits(), want.to_bits(), "{sampler:?}, pixel ({x}, {y}): {got} vs {want}");
+            }
+            assert!(hits > 0 && layer.data().iter().any(|&d| d > 0.0));
+        }
+    }
 }

@@ -1,6 +1,7 @@
 //! Nearest-record search against brute force.
 
 use super::super::*;
+use filtrace_core::cpu::Isa;
 use filtrace_core::rng::SplitMix64;
 use filtrace_core::Vec3;
 
@@ -30,6 +31,8 @@ fn point_set(kind: usize, n: usize, rng: &mut SplitMix64) -> (Vec<Vec3>, Vec<Vec
     (positions, normals)
 }
 
+/// Exact: the same `(distance, index)` bits as brute force, with the baseline and the
+/// AVX2 lane code, on uniform, clustered and duplicated points.
 #[test]
 fn kd_tree_matches_brute_force() {
     let mut rng = SplitMix64::new(0x5eed);
@@ -42,9 +45,16 @@ fn kd_tree_matches_brute_force() {
                     let q = Vec3::new(rng.range(-1.0, 3.0), rng.range(-1.0, 3.0), rng.range(-1.0, 3.0));
                     let qn = rng.unit_vector();
                     for k in 1..=MAX_NEIGHBOURS + 1 {
-                        let fast = tree.nearest(q, qn, k);
                         let slow = tree.nearest_brute_force(q, qn, k);
-                        assert_eq!(fast.as_slice(), &slow[..], "kind {kind}, n {n}, lambda {lambda}, k {k}");
+                        // Every lane-code level this CPU runs: the same bits.
+                        for level in Isa::supported() {
+                            let fast = tree.nearest_with(level, q, qn, k);
+                            assert_eq!(
+                                fast.as_slice(),
+                                &slow[..],
+                                "kind {kind}, n {n}, lambda {lambda}, k {k}, {level:?}"
+                            );
+                        }
                     }
                 }
             }

@@ -14,6 +14,7 @@
 //!   optimisation step after each pass; the d-distance layer of the thesis's Figure 27.
 //! - [`seam`]: plugging it into a [`filtrace_render::Renderer`] and rendering a frame in
 //!   progressive passes ([`render_vpl_frame`], [`render_vpl_passes`]).
+//! - `soa`: the cache's evaluation of eight VPLs at a time (structure of arrays).
 //! - [`rays`]: shadow rays counted (and sampled for replay) for the experiments' clocks.
 //!
 //! A VPL's `weight` already holds every Monte Carlo normalisation (selection probability,
@@ -27,6 +28,7 @@ pub mod generate;
 pub mod integrator;
 pub mod rays;
 pub mod seam;
+mod soa;
 
 #[cfg(test)]
 mod tests;

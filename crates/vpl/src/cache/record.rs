@@ -4,7 +4,6 @@
 use super::optimize::RecordParams;
 use super::search::{KdTree, Neighbours};
 use super::{CacheParams, CachePoint, RecordValues, Region, Technique, VplSet, TECHNIQUES};
-use filtrace_core::sampling::normalized_cdf;
 use filtrace_core::{luminance, Rgb, Vec3};
 use rayon::prelude::*;
 
@@ -37,11 +36,7 @@ impl CacheRecord {
             point,
             radius,
             normal_cone,
-            distributions: [
-                VplCdf::new(&values.full),
-                VplCdf::new(&values.unoccluded),
-                VplCdf::new(&values.bounded),
-            ],
+            distributions: VplCdf::three([&values.full, &values.unoccluded, &values.bounded]),
             totals: [t[0], t[1], t[2], t[1]],
         }
     }
@@ -105,6 +100,16 @@ impl CacheRecord {
 /// values (2 lines) instead of a binary search over the whole table (~7 cold lines).
 const CDF_BLOCK: usize = 32;
 
+/// A weight as the distributions count it: non-finite and negative ones are 0.
+#[inline]
+fn sanitised(w: f32) -> f32 {
+    if w.is_finite() && w > 0.0 {
+        w
+    } else {
+        0.0
+    }
+}
+
 /// A discrete distribution over the VPLs: the CDF of `filtrace_core`'s `Distribution1D`,
 /// built with the same arithmetic (f64 sums, so the same `f32` values) and sampled with
 /// the same rule (the partition point of `cdf[1..] <= u`, zero cells skipped), so pmfs and
@@ -124,10 +129,45 @@ impl VplCdf {
     /// The distribution of `weights` (non-finite and negative ones count as 0; all zero:
     /// uniform).
     pub fn new(weights: &[f32]) -> Self {
-        let func: Vec<f32> =
-            weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w } else { 0.0 }).collect();
-        let n = func.len();
-        let (cdf, total) = normalized_cdf(&func);
+        let [cdf] = Self::several([weights]);
+        cdf
+    }
+
+    /// The three distributions of a record (E¹, E², E³).
+    pub fn three(weights: [&[f32]; 3]) -> [Self; 3] {
+        Self::several(weights)
+    }
+
+    /// [`VplCdf::new`] of each list: `filtrace_core`'s `normalized_cdf` of the sanitised
+    /// weights, the same arithmetic in the same order (so the same bits), without the
+    /// sanitised copy and without a `push` per cell.
+    fn several<const K: usize>(weights: [&[f32]; K]) -> [Self; K] {
+        weights.map(|w| {
+            // `normalized_cdf`'s sum (`f64`'s `Sum`, whose start value it keeps).
+            let total64: f64 = w.iter().map(|&x| sanitised(x) as f64).sum();
+            VplCdf::from_total(w, total64)
+        })
+    }
+
+    /// The CDF of `weights` whose sanitised sum is `total64` (`normalized_cdf`'s loop).
+    fn from_total(weights: &[f32], total64: f64) -> Self {
+        let n = weights.len();
+        let mut cdf = vec![0.0f32; n + 1];
+        if total64 > 0.0 && total64.is_finite() {
+            let mut acc = 0.0f64;
+            for (c, &w) in cdf[1..].iter_mut().zip(weights) {
+                acc += sanitised(w) as f64;
+                *c = (acc / total64) as f32;
+            }
+        } else {
+            for (i, c) in cdf.iter_mut().enumerate().skip(1) {
+                *c = i as f32 / n as f32;
+            }
+        }
+        if n > 0 {
+            cdf[n] = 1.0;
+        }
+        let total = if total64.is_finite() { total64 as f32 } else { 0.0 };
         let coarse = (0..n.div_ceil(CDF_BLOCK)).map(|b| cdf[((b + 1) * CDF_BLOCK).min(n)]).collect();
         VplCdf { cdf, coarse, total }
     }
@@ -369,6 +409,31 @@ mod tests {
                     let expected = if n == 0 { 0 } else { reference.sample_discrete(u).0 };
                     assert_eq!(fast.sample(u), expected, "n {n}, case {case}, u {u}");
                 }
+            }
+        }
+    }
+
+    /// A record's three CDFs built together are the three built alone, bit for bit
+    /// (lists with zeros, bad values, all zero), and `new`'s are `Distribution1D`'s (above).
+    #[test]
+    fn three_cdfs_at_once_equal_three_alone() {
+        let mut rng = SplitMix64::new(9);
+        for &n in &[0usize, 1, 33, 2048] {
+            let lists: [Vec<f32>; 3] = [
+                (0..n).map(|_| rng.range(0.0, 1.0)).collect(),
+                (0..n).map(|i| if i % 5 == 0 { f32::INFINITY } else { rng.range(-1.0, 1.0) }).collect(),
+                vec![0.0; n],
+            ];
+            let together = VplCdf::three([&lists[0], &lists[1], &lists[2]]);
+            for (k, list) in lists.iter().enumerate() {
+                let alone = VplCdf::new(list);
+                let bits = |c: &VplCdf| {
+                    (
+                        c.cdf.iter().chain(&c.coarse).map(|x| x.to_bits()).collect::<Vec<_>>(),
+                        c.total.to_bits(),
+                    )
+                };
+                assert_eq!(bits(&together[k]), bits(&alone), "n {n}, list {k}");
             }
         }
     }

@@ -203,6 +203,13 @@ impl RelaxedReceiver {
         RelaxedReceiver { n0, radius, cone }
     }
 
+    /// The ball's radius and the normal cone's `(sin, cos)` (`None` for a cone of 0), for
+    /// the eight-lane version of [`RelaxedReceiver::towards`] (`vpls/soa.rs`).
+    #[inline]
+    pub fn radius_and_cone(&self) -> (f32, Option<(f32, f32)>) {
+        (self.radius, self.cone)
+    }
+
     /// The relaxed term towards a VPL at distance `r > 0` along the unit direction `w`.
     #[inline]
     pub fn towards(&self, w: Vec3, r: f32, n_vpl: Option<Vec3>) -> f32 {

@@ -6,9 +6,11 @@
 //! VPLs (depth 0) are `direct`, the rest `indirect`.
 
 use super::eval::{contribution, contribution_parts, PairParts, Receiver};
+use super::soa::{evaluate_groups, DiffuseSite, VplLanes};
 use super::{Vpl, VplKind, Vpls};
 use crate::cache::{relaxed_geometry_term_fast, CachePoint, RecordValues, Region, RelaxedReceiver, VplSet};
 use filtrace_accel::{fan_class, SceneAccel, SegmentFan, FAN_CLASSES, LANES};
+use filtrace_core::cpu::{isa, Isa};
 use filtrace_core::sampler::Sampler;
 use filtrace_core::{luminance, Ray, Rgb, Vec3};
 use filtrace_render::film::{Film, VisibleSurface};
@@ -107,6 +109,8 @@ pub struct SceneVpls<'a> {
     pub vpls: &'a Vpls,
     /// Per pixel (row-major), the surface seen through its centre.
     pub receivers: &'a [Option<Receiver>],
+    /// The VPLs of the eight-lane path as a structure of arrays.
+    lanes: VplLanes,
 }
 
 /// Smallest `|wi.z|` [`f_folded`] keeps; at or above it a `wi` in the upper hemisphere
@@ -125,9 +129,97 @@ fn f_folded(bsdf: &filtrace_render::bsdf::SurfaceBsdf, wo: Vec3, wi: Vec3) -> Rg
     bsdf.f(wo, folded)
 }
 
-impl SceneVpls<'_> {
+impl<'a> SceneVpls<'a> {
+    /// The cache's view of `vpls` (with their structure-of-arrays copy, made once here).
+    pub fn new(ctx: PathContext<'a>, vpls: &'a Vpls, receivers: &'a [Option<Receiver>]) -> Self {
+        SceneVpls { ctx, vpls, receivers, lanes: VplLanes::new(&vpls.vpls) }
+    }
+
     fn receiver(&self, site: &CachePoint) -> Option<&Receiver> {
         self.receivers.get(site.pixel as usize)?.as_ref()
+    }
+
+    /// [`VplSet::evaluate_record`] with the lane code of `isa` (at most the detected level;
+    /// the tests run every level against the per-VPL reference): the groups of
+    /// [`VplLanes`] eight at a time at a diffuse receiver, every other pair per VPL.
+    pub(crate) fn evaluate_record_with(
+        &self,
+        site: &CachePoint,
+        region: &Region,
+        out: &mut RecordValues,
+        isa: Isa,
+    ) {
+        let n = self.vpls.len();
+        out.clear(n);
+        let Some(rx) = self.receiver(site) else { return };
+        let (mut rgb, mut visible) = (std::mem::take(&mut out.rgb), std::mem::take(&mut out.visible));
+        rgb.clear();
+        rgb.resize(n, (Rgb::ZERO, Rgb::ZERO));
+        visible.clear();
+        visible.resize(n, false);
+        let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
+        let mut pass = RecordPass {
+            rgb: &mut rgb,
+            unoccluded: &mut out.unoccluded,
+            bounded: &mut out.bounded,
+            visible: &mut visible,
+            packets: ShadowPackets::new(self.ctx.accel, rx),
+        };
+        match DiffuseSite::new(rx, &relaxed, self.vpls.bound) {
+            Some(diffuse) => {
+                evaluate_groups(&self.lanes, &diffuse, isa, |g, p| {
+                    for i in 0..g.live {
+                        let j = g.index[i] as usize;
+                        if p.valid >> i & 1 == 0 {
+                            self.evaluate_pair(j, rx, region, &relaxed, &mut pass);
+                            continue;
+                        }
+                        if p.ray >> i & 1 != 0 {
+                            let side = (p.back >> i & 1) as usize;
+                            pass.packets.push_lane(j, side, p.w(i), p.t_max[i], pass.visible);
+                        }
+                        pass.store(j, p.c(i), p.b(i), p.lum_c[i], p.lum_b[i]);
+                    }
+                });
+                for &j in &self.lanes.others {
+                    self.evaluate_pair(j as usize, rx, region, &relaxed, &mut pass);
+                }
+            }
+            None => (0..n).for_each(|j| self.evaluate_pair(j, rx, region, &relaxed, &mut pass)),
+        }
+        pass.packets.flush(pass.visible);
+        // The totals in VPL order, as the reference sums them.
+        for (j, (&(c, b), &vis)) in rgb.iter().zip(&visible).enumerate() {
+            if vis {
+                out.full[j] = out.unoccluded[j];
+            }
+            out.totals[0] += if vis { c } else { Rgb::ZERO };
+            out.totals[1] += c;
+            out.totals[2] += b;
+        }
+        (out.rgb, out.visible) = (rgb, visible);
+    }
+
+    /// One pair the per-VPL way: the contribution with its parts, its shadow ray queued,
+    /// the bounded term from the parts.
+    fn evaluate_pair(
+        &self,
+        j: usize,
+        rx: &Receiver,
+        region: &Region,
+        relaxed: &RelaxedReceiver,
+        pass: &mut RecordPass,
+    ) {
+        let v = &self.vpls.vpls[j];
+        let (c, w, dist, parts) = contribution_parts(v, rx, self.vpls.bound);
+        if luminance(c) > 0.0 && dist > 0.0 {
+            pass.packets.push(j, &rx.shadow_ray(w, dist), pass.visible);
+        }
+        let bounded = match parts {
+            Some(parts) => bounded_towards(v, rx, w, dist, &parts, relaxed),
+            None => self.bounded_at(v, rx, region, relaxed),
+        };
+        pass.store(j, c, bounded, luminance(c), luminance(bounded));
     }
 
     /// `E f_VPL f0` at folded directions times the relaxed geometry term (the cache's
@@ -216,9 +308,16 @@ impl<'a> ShadowPackets<'a> {
             visible[j] = !self.accel.occluded(ray);
             return;
         }
-        let class = fan_class(ray.dir);
+        self.push_lane(j, side, ray.dir, ray.t_max, visible);
+    }
+
+    /// Queues the shadow ray of VPL `j` from `origins[side]` along `dir` to `t_max` (the
+    /// ray [`Receiver::shadow_ray`] makes, given by its parts).
+    #[inline]
+    fn push_lane(&mut self, j: usize, side: usize, dir: Vec3, t_max: f32, visible: &mut [bool]) {
+        let class = fan_class(dir);
         let (fan, ids, len) = &mut self.fans[side][class];
-        fan.set_lane(*len, ray.dir, ray.t_max);
+        fan.set_lane(*len, dir, t_max);
         ids[*len] = j as u32;
         *len += 1;
         if *len == LANES {
@@ -275,38 +374,35 @@ impl VplSet for SceneVpls<'_> {
     }
 
     /// The same values as [`evaluate_each_vpl`], bit for bit, with one evaluation of each
-    /// VPL's contribution (the per-VPL methods find it twice), the bounded term from the
-    /// BSDF values the contribution found (`contribution_parts`; the reference evaluates
-    /// both BSDFs again), and the visibility rays traced as fans of eight from the
-    /// record's point ([`ShadowPackets`]; VPLs that cannot light the record, e.g. behind
-    /// its surface, get no ray). The RGB totals are summed in VPL order afterwards, as the
-    /// reference does.
+    /// VPL's contribution (the per-VPL methods find it twice), eight VPLs at a time for a
+    /// diffuse receiver and emitter or diffuse VPLs (`vpls/soa.rs`), the bounded term from
+    /// the BSDF values the contribution found (`contribution_parts`; the reference
+    /// evaluates both BSDFs again), and the visibility rays traced as fans of eight from
+    /// the record's point ([`ShadowPackets`]; VPLs that cannot light the record, e.g.
+    /// behind its surface, get no ray). The RGB totals are summed in VPL order
+    /// afterwards, as the reference does.
     fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {
-        let n = self.vpls.len();
-        out.clear(n);
-        let Some(rx) = self.receiver(site) else { return };
-        let (mut rgb, mut visible) = (std::mem::take(&mut out.rgb), std::mem::take(&mut out.visible));
-        rgb.clear();
-        visible.clear();
-        visible.resize(n, false);
-        let mut packets = ShadowPackets::new(self.ctx.accel, rx);
-        let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
-        for (j, v) in self.vpls.vpls.iter().enumerate() {
-            let (c, w, dist, parts) = contribution_parts(v, rx, self.vpls.bound);
-            if luminance(c) > 0.0 && dist > 0.0 {
-                packets.push(j, &rx.shadow_ray(w, dist), &mut visible);
-            }
-            let bounded = match parts {
-                Some(parts) => bounded_towards(v, rx, w, dist, &parts, &relaxed),
-                None => self.bounded_at(v, rx, region, &relaxed),
-            };
-            rgb.push((c, bounded));
-        }
-        packets.flush(&mut visible);
-        for (j, (&(c, b), &vis)) in rgb.iter().zip(&visible).enumerate() {
-            out.set(j, if vis { c } else { Rgb::ZERO }, c, b);
-        }
-        (out.rgb, out.visible) = (rgb, visible);
+        self.evaluate_record_with(site, region, out, isa());
+    }
+}
+
+/// One record's evaluation in progress: per VPL the RGB unoccluded and bounded
+/// contributions and their luminances, and the visibility the fans find.
+struct RecordPass<'s, 'a> {
+    rgb: &'s mut [(Rgb, Rgb)],
+    unoccluded: &'s mut [f32],
+    bounded: &'s mut [f32],
+    visible: &'s mut [bool],
+    packets: ShadowPackets<'a>,
+}
+
+impl RecordPass<'_, '_> {
+    /// VPL `j`'s E² and E³, and their luminances as `RecordValues::set` keeps them.
+    #[inline]
+    fn store(&mut self, j: usize, c: Rgb, b: Rgb, lum_c: f32, lum_b: f32) {
+        self.rgb[j] = (c, b);
+        self.unoccluded[j] = lum_c.max(0.0);
+        self.bounded[j] = lum_b.max(0.0);
     }
 }
 
@@ -357,13 +453,15 @@ mod packet_tests {
         let bvh =
             SceneAccel::build_with(&scene, &BuildParams { max_flat_triangles: 0, ..BuildParams::default() });
         for accel in [r.context().accel, &bvh] {
-            let set =
-                SceneVpls { ctx: PathContext { accel, ..r.context() }, vpls: &vpls, receivers: &receivers };
+            let set = SceneVpls::new(PathContext { accel, ..r.context() }, &vpls, &receivers);
             let (mut packet, mut reference) = (RecordValues::default(), RecordValues::default());
             let (mut visible, mut occluded) = (0, 0);
             for site in &sites {
                 let region = Region { radius: 0.1, normal_cone: 0.2 };
-                set.evaluate_record(site, &region, &mut packet);
+                set.evaluate_record_with(site, &region, &mut packet, filtrace_core::cpu::Isa::Base);
+                let mut widest = RecordValues::default();
+                set.evaluate_record(site, &region, &mut widest);
+                assert_eq!(widest.full, packet.full, "widest lane code vs portable at pixel {}", site.pixel);
                 evaluate_each_vpl(&set, site, &region, &mut reference);
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&packet.full), bits(&reference.full), "E1 at pixel {}", site.pixel);

@@ -379,7 +379,7 @@ fn build_cache(
     let Ok(points) = place_cache_points(view, settings.cache.cache_points, frame.seed) else {
         return empty();
     };
-    let set = SceneVpls { ctx: frame.ctx, vpls, receivers };
+    let set = SceneVpls::new(frame.ctx, vpls, receivers);
     let diagonal = frame.ctx.scene.bounds().extent().length();
     ImportanceCache::build(&set, points, diagonal, &settings.cache, previous).unwrap_or_else(|_| empty())
 }

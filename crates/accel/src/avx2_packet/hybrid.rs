@@ -94,7 +94,8 @@ impl ChildBoxes for LaneBoxes8 {
 
 /// Closest hits of the lanes of `rays` set in `active` in the 8-wide BVH `nodes`/`tris`,
 /// as a packet where at least `min_lanes` lanes share a subtree and one lane at a time
-/// below ([`MIN_PACKET_LANES`] in the renderer; the tests also take 0 and 9).
+/// below ([`MIN_PACKET_LANES`] in `SceneAccel::intersect_packet_hybrid`; the tests also
+/// take 0, 1 and 9).
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.

@@ -195,6 +195,23 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
     r: &RayBoxes8,
     t_min: f32,
     t_max: &mut f32,
+    leaves: L,
+) -> bool {
+    let root = Entry { child: 0, count: 0, t: t_min };
+    traverse8_from::<L, ORDERED>(nodes, root, r, t_min, t_max, leaves)
+}
+
+/// [`traverse8`] of the subtree `start` only (a node, or a leaf range, that the caller
+/// found the ray to touch): the single-ray half of the hybrid packet traversal
+/// (`avx2_packet::hybrid`).
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn traverse8_from<L: Leaves, const ORDERED: bool>(
+    nodes: &[Node8],
+    start: Entry,
+    r: &RayBoxes8,
+    t_min: f32,
+    t_max: &mut f32,
     mut leaves: L,
 ) -> bool {
     if nodes.is_empty() {
@@ -203,7 +220,7 @@ pub(crate) fn traverse8<L: Leaves, const ORDERED: bool>(
     let t_min8 = _mm256_set1_ps(t_min);
     let mut stack = [MaybeUninit::<Entry>::uninit(); STACK8];
     let mut sp = 0usize;
-    let mut cur = Entry { child: 0, count: 0, t: t_min };
+    let mut cur = start;
     let mut t_near = Lanes8([0.0; 8]);
     loop {
         if cur.count == 0 {

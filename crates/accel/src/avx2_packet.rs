@@ -19,7 +19,9 @@
 //!   and watertight permutation, directions within [`MAX_SPREAD`]: camera tiles): one
 //!   traversal for the packet, each child
 //!   box tested against the 8 rays (8 rays x 1 box), leaves as for flat meshes. Other
-//!   packets are left to the caller (one single-ray query per lane).
+//!   packets are left to the caller: any hits to the hybrid packet / single-ray traversal
+//!   (submodule `hybrid`, Benthin et al. 2012), closest hits to one single-ray query per
+//!   lane (the hybrid lost there; docs/perf-accel.md, "Stop 16").
 //!
 //! Per lane the arithmetic is that of the single-ray kernels, operation for operation
 //! (ray validity, bounds check, the watertight permutation and shear, the watertight test
@@ -56,9 +58,11 @@ use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
 
 mod flat;
+mod hybrid;
 pub(crate) use flat::{
     closest_flat, closest_flat_avx512, flat_node_touch, occluded_flat, occluded_flat_avx512,
 };
+pub(crate) use hybrid::{closest_hybrid, occluded_hybrid, MIN_PACKET_LANES};
 
 /// Eight lanes, 32-byte aligned (for aligned vector loads and stores).
 #[repr(C, align(32))]
@@ -420,6 +424,21 @@ struct Boxes8 {
     far: [usize; 3],
 }
 
+/// The packet's box test of one child (8 rays x 1 box): [`Boxes8`] for lanes of one
+/// direction octant, `hybrid::LaneBoxes8` for any.
+trait ChildBoxes {
+    /// Lanes of `lanes` whose rays touch child `i` of `n` (the test of `avx2::box8`, lane
+    /// for lane) and their entry distances.
+    unsafe fn child(
+        &self,
+        n: &Node8,
+        i: usize,
+        t_min: __m256,
+        t_cull: __m256,
+        lanes: __m256,
+    ) -> (u32, __m256);
+}
+
 impl Boxes8 {
     /// `None` when the lanes `active` differ in direction sign on some axis (lanes with
     /// NaN directions count as differing).
@@ -455,9 +474,9 @@ impl Boxes8 {
         }
         Some(b)
     }
+}
 
-    /// Lanes of `lanes` whose rays touch child `i` of `n` (the test of `avx2::box8`, lane
-    /// for lane) and their entry distances.
+impl ChildBoxes for Boxes8 {
     #[inline(always)]
     unsafe fn child(
         &self,
@@ -538,9 +557,9 @@ unsafe fn cull8(t_max: __m256) -> __m256 {
 /// farthest deepest when `ORDERED`, by the entry distance of each child's lowest lane) and
 /// returns the one to visit next.
 #[inline(always)]
-unsafe fn expand<const ORDERED: bool>(
+unsafe fn expand<const ORDERED: bool, B: ChildBoxes>(
     node: &Node8,
-    b: &Boxes8,
+    b: &B,
     t_min: __m256,
     t_cull: __m256,
     lanes: u32,
@@ -620,36 +639,13 @@ pub(crate) unsafe fn closest_bvh(
         if cur.count == 0 {
             let node = &nodes[cur.child as usize];
             if let Some(next) =
-                expand::<true>(node, &b, r.t_min, cull8(best.t), cur.lanes, &mut stack, &mut sp)
+                expand::<true, _>(node, &b, r.t_min, cull8(best.t), cur.lanes, &mut stack, &mut sp)
             {
                 cur = next;
                 continue;
             }
         } else {
-            let act = lane_mask(cur.lanes);
-            let t_min_act = _mm256_blendv_ps(_mm256_set1_ps(f32::NAN), r.t_min, act);
-            for j in cur.child as usize..(cur.child + cur.count) as usize {
-                let tri = &tris.packets[j];
-                for l in 0..4 {
-                    let id = tris.prim_ids[4 * j + l];
-                    if id == u32::MAX {
-                        continue;
-                    }
-                    let corners = [
-                        corner_packet(tri, 0, l, k),
-                        corner_packet(tri, 1, l, k),
-                        corner_packet(tri, 2, l, k),
-                    ];
-                    let Some((edge, reject, t, u, v)) = test_tri::<true>(corners, &r, act) else {
-                        continue;
-                    };
-                    if _mm256_movemask_ps(edge) != 0 {
-                        best.update_scalar(r.rays, cur.lanes, &mut out, &tri.lane(l), id);
-                        continue;
-                    }
-                    best.update(t, u, v, reject, t_min_act, id);
-                }
-            }
+            closest_leaf::<true>(tris, &r, k, &cur, &mut best, &mut out);
         }
         // Next pending subtree (its box tests cull the lanes that found closer hits).
         if sp == 0 {
@@ -693,39 +689,13 @@ pub(crate) unsafe fn occluded_bvh(
     loop {
         if cur.count == 0 {
             let node = &nodes[cur.child as usize];
-            if let Some(next) = expand::<false>(node, &b, r.t_min, t_cull, cur.lanes, &mut stack, &mut sp) {
+            if let Some(next) = expand::<false, _>(node, &b, r.t_min, t_cull, cur.lanes, &mut stack, &mut sp)
+            {
                 cur = next;
                 continue;
             }
         } else {
-            let mut act = lane_mask(cur.lanes);
-            for j in cur.child as usize..(cur.child + cur.count) as usize {
-                let tri = &tris.packets[j];
-                for l in 0..4 {
-                    if tris.prim_ids[4 * j + l] == u32::MAX {
-                        continue;
-                    }
-                    let corners = [
-                        corner_packet(tri, 0, l, k),
-                        corner_packet(tri, 1, l, k),
-                        corner_packet(tri, 2, l, k),
-                    ];
-                    let Some((edge, reject, t, _, _)) = test_tri::<false>(corners, &r, act) else {
-                        continue;
-                    };
-                    let hit = if _mm256_movemask_ps(edge) != 0 {
-                        lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.lane(l)))
-                    } else {
-                        let in_range = _mm256_and_ps(
-                            _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
-                            _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max),
-                        );
-                        _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act)
-                    };
-                    act = _mm256_andnot_ps(hit, act);
-                    left &= !(_mm256_movemask_ps(hit) as u32);
-                }
-            }
+            left &= !occluded_leaf(tris, &r, k, &cur);
             if left == 0 {
                 return Some(r.active as u8);
             }
@@ -743,4 +713,72 @@ pub(crate) unsafe fn occluded_bvh(
             }
         }
     }
+}
+
+/// The leaf `cur` of a packet traversal (its triangle ids `cur.child..+cur.count` packets)
+/// against the lanes `cur.lanes`, all of permutation `k`, updating the closest hits `best`
+/// (`out`: scratch for the scalar edge fallback). `EARLY`: as in [`test_sheared`].
+#[inline(always)]
+unsafe fn closest_leaf<const EARLY: bool>(
+    tris: &TriPackets,
+    r: &Regs<'_>,
+    k: [usize; 3],
+    cur: &PacketEntry,
+    best: &mut Best8,
+    out: &mut Closest8,
+) {
+    let act = lane_mask(cur.lanes);
+    let t_min_act = _mm256_blendv_ps(_mm256_set1_ps(f32::NAN), r.t_min, act);
+    for j in cur.child as usize..(cur.child + cur.count) as usize {
+        let tri = &tris.packets[j];
+        for l in 0..4 {
+            let id = tris.prim_ids[4 * j + l];
+            if id == u32::MAX {
+                continue;
+            }
+            let corners =
+                [corner_packet(tri, 0, l, k), corner_packet(tri, 1, l, k), corner_packet(tri, 2, l, k)];
+            let Some((edge, reject, t, u, v)) = test_tri::<EARLY>(corners, r, act) else {
+                continue;
+            };
+            if _mm256_movemask_ps(edge) != 0 {
+                best.update_scalar(r.rays, cur.lanes, out, &tri.lane(l), id);
+                continue;
+            }
+            best.update(t, u, v, reject, t_min_act, id);
+        }
+    }
+}
+
+/// The lanes of `cur.lanes` (all of permutation `k`) that hit a triangle of the leaf
+/// `cur` with `t` in `[t_min, t_max]`.
+#[inline(always)]
+unsafe fn occluded_leaf(tris: &TriPackets, r: &Regs<'_>, k: [usize; 3], cur: &PacketEntry) -> u32 {
+    let mut act = lane_mask(cur.lanes);
+    let mut hits = 0;
+    for j in cur.child as usize..(cur.child + cur.count) as usize {
+        let tri = &tris.packets[j];
+        for l in 0..4 {
+            if tris.prim_ids[4 * j + l] == u32::MAX {
+                continue;
+            }
+            let corners =
+                [corner_packet(tri, 0, l, k), corner_packet(tri, 1, l, k), corner_packet(tri, 2, l, k)];
+            let Some((edge, reject, t, _, _)) = test_tri::<false>(corners, r, act) else {
+                continue;
+            };
+            let hit = if _mm256_movemask_ps(edge) != 0 {
+                lane_mask(any_scalar(r.rays, _mm256_movemask_ps(act) as u32, &tri.lane(l)))
+            } else {
+                let in_range = _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, r.t_max),
+                );
+                _mm256_and_ps(_mm256_andnot_ps(reject, in_range), act)
+            };
+            act = _mm256_andnot_ps(hit, act);
+            hits |= _mm256_movemask_ps(hit) as u32;
+        }
+    }
+    hits
 }

@@ -88,7 +88,13 @@ impl SceneAccel {
                         }
                         Blas::Flat(flat) => Some(avx2_packet::occluded_flat(flat, rays, active)),
                         Blas::Bvh8(bvh) if active.count_ones() >= MIN_LANES_ANY_BVH => {
-                            avx2_packet::occluded_bvh(&bvh.nodes, &bvh.tris, rays, active)
+                            // Coherent packets (camera tiles) take the packet traversal,
+                            // any other the hybrid one (docs/perf-accel.md, stop 16).
+                            let (nodes, tris) = (&bvh.nodes, &bvh.tris);
+                            avx2_packet::occluded_bvh(nodes, tris, rays, active).or_else(|| {
+                                let min = avx2_packet::MIN_PACKET_LANES;
+                                Some(avx2_packet::occluded_hybrid(nodes, tris, rays, active, min))
+                            })
                         }
                         _ => None,
                     }
@@ -102,6 +108,26 @@ impl SceneAccel {
             }
         }
         self.occluded_packet_lanes(rays, active)
+    }
+
+    /// [`SceneAccel::intersect_packet`] by the hybrid packet / single-ray traversal
+    /// (`avx2_packet::hybrid`) wherever the scene is a single 8-wide BVH and the CPU has
+    /// AVX2, else as `intersect_packet`. Not the default: on BVH meshes it lost to one
+    /// single-ray query per lane for incoherent and wide packets and to the coherent
+    /// kernel for camera tiles (docs/perf-accel.md, "Stop 16"); kept for the benchmarks.
+    pub fn intersect_packet_hybrid(&self, rays: &RayPacket, active: u8) -> HitPacket {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd == Simd::Avx2 {
+            if let Some((object, transformed)) = self.single_object() {
+                let mut local = None;
+                let (rays, active) = self.object_rays(object, transformed, rays, active, &mut local);
+                if let Blas::Bvh8(bvh) = self.object_blas(object) {
+                    // SAFETY: as in `intersect_packet`.
+                    return unsafe { self.intersect_hybrid_avx2(object, bvh, rays, active) };
+                }
+            }
+        }
+        self.intersect_packet(rays, active)
     }
 
     /// [`SceneAccel::intersect_packet`] as one single-ray query per active lane (the
@@ -260,6 +286,24 @@ impl SceneAccel {
         Some(self.hit_packet(object, &c))
     }
 
+    /// The closest-hit hybrid traversal of a single object's BVH with AVX2.
+    ///
+    /// Safety: the CPU has AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn intersect_hybrid_avx2(
+        &self,
+        object: u32,
+        bvh: &WideBvh<8>,
+        rays: &RayPacket,
+        active: u8,
+    ) -> HitPacket {
+        let min = avx2_packet::MIN_PACKET_LANES;
+        // SAFETY: this function runs with AVX2 and FMA.
+        let c = unsafe { avx2_packet::closest_hybrid(&bvh.nodes, &bvh.tris, rays, active, min) };
+        self.hit_packet(object, &c)
+    }
+
     /// The kernels' closest hits `c` on `object` as a [`HitPacket`], with vector selects
     /// instead of a branch per lane (whether a lane hit is a coin flip on some packets);
     /// lanes without a hit keep zeros, as `HitPacket::default`.
@@ -357,5 +401,64 @@ mod tests {
             assert_eq!(occ & (1 << i) != 0, active && accel.occluded(&p.lane(i)));
         }
         assert_ne!(h.mask, 0);
+    }
+
+    /// The hybrid traversal equals the single-ray queries at every lane threshold: 0 and
+    /// 1 (a packet down to the leaves, leaves of mixed permutations lane by lane), the
+    /// renderer's, and 9 (every lane alone from the root), on coherent and incoherent
+    /// packets with random masks.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn hybrid_equals_single_rays_at_every_threshold() {
+        if !Simd::Avx2.available() {
+            println!("SKIPPED: no AVX2 on this CPU");
+            return;
+        }
+        let mut scene = Scene::default();
+        scene.add_mesh(testmesh::displaced_sphere(24, 0.3));
+        let accel = SceneAccel::build_simd(&scene, &crate::BuildParams::default(), Simd::Avx2);
+        let (object, transformed) = accel.single_object().expect("one object");
+        let Blas::Bvh8(bvh) = accel.object_blas(object) else { panic!("not an 8-wide BVH") };
+        assert!(!transformed);
+        let mut rng = testmesh::SplitMix64(9);
+        let (mut hits, mut occluded) = (0, 0);
+        for k in 0..1500 {
+            let spread = [0.001, 0.03, 0.2, 3.0][k % 4];
+            let axis = rng.unit_vector();
+            let o = -2.5 * axis;
+            let mut p = RayPacket::default();
+            for i in 0..LANES {
+                let jitter = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+                let t_max = if k % 3 == 0 { 2.5 } else { f32::INFINITY };
+                p.set_lane(i, &Ray::segment(o + 0.1 * jitter, axis + spread * jitter, 0.0, t_max));
+            }
+            let active = if k % 2 == 0 { 0xff } else { rng.next_u64() as u8 };
+            for min_lanes in [0, 1, avx2_packet::MIN_PACKET_LANES, 9] {
+                // SAFETY: AVX2 checked above.
+                let (h, occ) = unsafe {
+                    let c = avx2_packet::closest_hybrid(&bvh.nodes, &bvh.tris, &p, active, min_lanes);
+                    (
+                        accel.hit_packet(object, &c),
+                        avx2_packet::occluded_hybrid(&bvh.nodes, &bvh.tris, &p, active, min_lanes),
+                    )
+                };
+                for i in 0..LANES {
+                    let on = active & (1 << i) != 0;
+                    let want = if on { accel.intersect(&p.lane(i)) } else { None };
+                    let bits = |h: Option<crate::Hit>| {
+                        h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim))
+                    };
+                    assert_eq!(bits(h.lane(i)), bits(want), "case {k} min {min_lanes} lane {i}");
+                    assert_eq!(
+                        occ & (1 << i) != 0,
+                        on && accel.occluded(&p.lane(i)),
+                        "case {k} min {min_lanes} lane {i}"
+                    );
+                }
+                hits += h.mask.count_ones();
+                occluded += occ.count_ones();
+            }
+        }
+        assert!(hits > 5000 && occluded > 5000, "{hits} {occluded}");
     }
 }

@@ -1,7 +1,8 @@
 //! The 8-ray packet queries against the single-ray queries, lane by lane and bit for bit
 //! (`t`, `u`, `v` bits, instance and primitive, occlusion), on coherent (camera tiles,
 //! shadow rays towards a small quad) and incoherent rays, random active masks, invalid
-//! lanes, Cornell box vertices and edges; both kernels; flat, BVH and two-level scenes.
+//! lanes, Cornell box vertices and edges, packets of every direction spread and from
+//! surfaces (the hybrid traversal); both kernels; flat, BVH and two-level scenes.
 
 #[path = "support/rays.rs"]
 mod rays;
@@ -67,9 +68,11 @@ fn accels(scene: &Scene) -> Vec<SceneAccel> {
         .collect()
 }
 
-/// Packet queries equal the single-ray queries in every lane (inactive lanes: no hit).
+/// Packet queries (and the hybrid closest-hit traversal, not the default) equal the
+/// single-ray queries in every lane (inactive lanes: no hit).
 fn check_packet(accel: &SceneAccel, rays: &RayPacket, active: u8) -> (u32, u32) {
     let hits: HitPacket = accel.intersect_packet(rays, active);
+    let hybrid = accel.intersect_packet_hybrid(rays, active);
     let occ = accel.occluded_packet(rays, active);
     for i in 0..LANES {
         let ray = rays.lane(i);
@@ -82,6 +85,7 @@ fn check_packet(accel: &SceneAccel, rays: &RayPacket, active: u8) -> (u32, u32) 
             accel.simd(),
             hits.lane(i)
         );
+        assert_eq!(bits(hybrid.lane(i)), bits(want), "{:?} hybrid lane {i} of {active:#010b}", accel.simd());
         let want_occ = on && accel.occluded(&ray);
         assert_eq!(occ & (1 << i) != 0, want_occ, "{:?} occluded lane {i}: ray {ray:?}", accel.simd());
     }
@@ -205,6 +209,87 @@ fn cornell_vertices_and_edges_in_packets() {
             rev.reverse();
             let (p, active) = RayPacket::from_rays(&rev);
             check_packet(&accel, &p, active);
+        }
+    }
+}
+
+/// A packet of eight rays whose directions lie within `spread` of `axis` (per component of
+/// the unit direction, as the kernels measure it) from origins `origin(lane)`.
+fn cone_packet(
+    rng: &mut SplitMix64,
+    axis: Vec3,
+    spread: f32,
+    mut origin: impl FnMut(&mut SplitMix64) -> (Vec3, f32),
+    t_max: f32,
+) -> RayPacket {
+    let mut p = RayPacket::default();
+    for i in 0..LANES {
+        let jitter = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+        let (o, t_min) = origin(rng);
+        p.set_lane(i, &Ray::segment(o, axis + jitter * spread, t_min, t_max));
+    }
+    p
+}
+
+/// The hybrid packet traversal's entry (packets of every direction spread, from one
+/// point, from nearby points and from points on the surfaces, with `t_min` zero or
+/// not, closest hits and segments, random masks) equals the single-ray queries lane for
+/// lane.
+#[test]
+fn packets_of_every_spread_equal_single_rays() {
+    let spreads = [0.0, 0.005, 0.02, 0.04, 0.1, 0.3, 1.0, 4.0];
+    for (name, scene) in scenes() {
+        let b = scene.bounds();
+        if b.is_empty() {
+            continue;
+        }
+        let (c, r, ext) = (b.center(), b.bounding_radius(), b.extent());
+        for accel in accels(&scene) {
+            let mut rng = SplitMix64(17);
+            // Points on the surfaces: hits of random rays from inside.
+            let surface: Vec<Vec3> = rays::random_rays(&scene, 400, 3)
+                .iter()
+                .filter_map(|ray| accel.intersect(ray).map(|h| ray.origin + h.t * ray.dir))
+                .collect();
+            assert!(surface.len() > 50, "{name}: {} surface points", surface.len());
+            let (mut hits, mut occluded) = (0, 0);
+            for (k, &spread) in spreads.iter().cycle().take(8 * 150).enumerate() {
+                let axis = rng.unit_vector();
+                let near = c + (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5) * ext;
+                let p = match k % 3 {
+                    0 => cone_packet(&mut rng, axis, spread, |_| (c - axis * 2.0 * r, 0.0), f32::INFINITY),
+                    1 => cone_packet(
+                        &mut rng,
+                        axis,
+                        spread,
+                        |rng| (near + (rng.unit_vector() * 0.02 * r), 0.0),
+                        if k % 2 == 0 { f32::INFINITY } else { 0.5 * r },
+                    ),
+                    _ => {
+                        let i = rng.next_u64() as usize % surface.len();
+                        let t_min = if k % 2 == 0 { 0.0 } else { 1e-4 * r };
+                        cone_packet(
+                            &mut rng,
+                            axis,
+                            spread,
+                            |rng| {
+                                let j = (i + (rng.next_u64() % 8) as usize) % surface.len();
+                                (if spread < 0.05 { surface[i] } else { surface[j] }, t_min)
+                            },
+                            f32::INFINITY,
+                        )
+                    }
+                };
+                let active = if k % 4 == 0 { 0xff } else { rng.next_u64() as u8 | 0x0f };
+                let (h, o) = check_packet(&accel, &p, active);
+                hits += h;
+                occluded += o;
+            }
+            assert!(
+                hits > 1000 && occluded > 1000,
+                "{name} {:?}: {hits} hits, {occluded} occluded",
+                accel.simd()
+            );
         }
     }
 }

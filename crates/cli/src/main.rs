@@ -2,7 +2,7 @@
 //!
 //! Each subcommand lives in its own module under `cmd/` with its clap `Args` and a `run`.
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 mod cmd;
 
@@ -36,9 +36,17 @@ fn main() {
     exit_cleanly_on_println_failure();
     // The one CPU-feature check of the process: every SIMD path asks `cpu::isa()` after it.
     filtrace_core::cpu::isa();
-    let cli = Cli::parse();
+    // The matches are kept: some checks need to know which options were given, not only
+    // their values (a default is never a conflict).
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let result = match cli.command {
-        Command::Render(a) => cmd::render::run(a),
+        Command::Render(mut a) => {
+            if let Some(m) = matches.subcommand_matches("render") {
+                a.explicit_vpl = cmd::render::explicit_vpl_options(m);
+            }
+            cmd::render::run(a)
+        }
         Command::Denoise(a) => cmd::denoise::run(a),
         Command::Compare(a) => cmd::compare::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),

@@ -2,8 +2,9 @@
 //! layers, `cache_distance`, motion) + PNG per frame and the preview; identical files for
 //! the same command and for 1 or 2 threads; a frame of a sequence against the same frame
 //! rendered alone (equal for `balance`, different for `optimized`, whose parameters carry
-//! over); `--ground-truth` per frame; Ctrl-C; the memory check; options that do not
-//! combine (docs/many-light.md, "Sequences").
+//! over); `--ground-truth` per frame; Ctrl-C; `--resume` of an `optimized` sequence equal
+//! to the uninterrupted run, also after a state file is corrupt, missing or unwritable;
+//! the memory check; options that do not combine (docs/many-light.md, "Sequences").
 
 #[path = "support/run.rs"]
 mod run;
@@ -176,8 +177,8 @@ fn options_that_do_not_combine_exit_2_naming_the_option() {
         (&["--filter", "atrous"][..], "'--filter' cannot be used"),
         (&["--adaptive", "--frames", "0..1"][..], "'--adaptive' cannot be used"),
         (&["--trace", "lockstep", "--frame", "1"][..], "'--trace' cannot be used"),
-        (&["--integrator", "path", "--ground-truth"][..], "'--ground-truth' needs '--integrator vpl'"),
-        (&["--integrator", "path", "--vpl-clamp", "0.1", "--frames", "0..1"][..], "'--vpl-clamp' needs"),
+        (&["--integrator", "path", "--ground-truth"][..], "'--ground-truth' need '--integrator vpl'"),
+        (&["--integrator", "path", "--vpl-clamp", "0.1", "--frames", "0..1"][..], "'--vpl-clamp' need"),
     ] {
         let o = render("cornell-anim", args, &out);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
@@ -185,6 +186,175 @@ fn options_that_do_not_combine_exit_2_naming_the_option() {
         assert!(!stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
     }
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a refused render wrote files");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Every VPL option given without `--integrator vpl` (also at its default value, also
+/// with `--integrator path`, also for a sequence) is a usage error naming it and saying to
+/// add `--integrator vpl`, exit code 2, nothing written; the defaults alone render with the
+/// path tracer. (The path tracer's own options with `--integrator vpl`: the test above.)
+#[test]
+fn vpl_options_without_the_vpl_integrator_exit_2_naming_the_option() {
+    let dir = temp_dir("need-vpl");
+    let out = dir.join("n.exr");
+    let plain = ["render", "cornell", "--res", "8x8", "--spp", "1", "--max-depth", "2", "--out"];
+    for option in [
+        &["--vpls", "64"][..],
+        &["--vpls", "2048"],
+        &["--vpl-sampler", "balance"],
+        &["--vpl-sampler", "optimized", "--integrator", "path"],
+        &["--cache-points", "8"],
+        &["--cache-neighbours", "3", "--frames", "0..1"],
+        &["--ground-truth"],
+        &["--vpl-clamp", "0.1"],
+    ] {
+        let o = bin().args(plain).arg(&out).args(option).output().unwrap();
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{option:?}: {err}");
+        let want = format!("'{}' needs '--integrator vpl'", option[0]);
+        assert!(err.contains(&want) && err.contains("add --integrator vpl"), "{option:?}: {err}");
+        assert!(!err.contains("panicked"), "{option:?}: {err}");
+    }
+    let several = bin().args(plain).arg(&out).args(["--vpls", "8", "--ground-truth"]).output().unwrap();
+    assert_eq!(several.status.code(), Some(2));
+    assert!(stderr(&several).contains("'--vpls', '--ground-truth' need"), "{}", stderr(&several));
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a refused render wrote files");
+    ok(bin().args(plain).arg(&out).output().unwrap());
+    ok(bin().args(plain).arg(&out).args(["--integrator", "path"]).output().unwrap());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `optimized` on `classroom`, frames 0..3 (each continues the optimiser's state of the
+/// one before), renders to `DIR/c.exr`; `extra` adds options.
+fn optimized_sequence(dir: &Path, extra: &[&str]) -> Vec<String> {
+    let out = dir.join("c.exr").to_string_lossy().into_owned();
+    let mut a: Vec<String> =
+        args("classroom", &["--frames", "0..3", "--json"]).iter().map(|s| s.to_string()).collect();
+    a.extend(["--out".to_string(), out]);
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a
+}
+
+fn run_sequence(dir: &Path, extra: &[&str], env: Option<(&str, &str)>) -> Output {
+    let mut cmd = bin();
+    cmd.args(optimized_sequence(dir, extra));
+    if let Some((k, v)) = env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("filtrace runs")
+}
+
+fn state(dir: &Path, k: u32) -> PathBuf {
+    dir.join(format!("c.{k:04}.vpl-state.json"))
+}
+
+/// Frames 0..3 of `dir` and `reference` hold the same pixels, bit for bit.
+fn assert_same_frames(dir: &Path, reference: &Path, what: &str) {
+    for k in 0..4 {
+        let (got, want) = (channel_bits(&frame(dir, "c", k)), channel_bits(&frame(reference, "c", k)));
+        assert!(got == want, "{what}: frame {k} differs from the uninterrupted run");
+    }
+}
+
+/// `--resume` of an `optimized` sequence stopped by Ctrl-C after frame 1 is written
+/// (frames 0 and 1 on disk with their states) keeps them and renders frames 2 and 3 from
+/// the state after frame 1: the files are those of the uninterrupted run, bit for bit
+/// (state files too). Without carried state frame 2 would start from the prior and differ
+/// (`a_lone_frame_equals_its_frame_in_a_sequence_unless_the_sampler_learns`).
+#[cfg(unix)]
+#[test]
+fn an_optimized_sequence_resumed_after_ctrl_c_equals_the_uninterrupted_one() {
+    let (whole, cut) = (temp_dir("resume-whole"), temp_dir("resume-cut"));
+    let o = ok(run_sequence(&whole, &[], None));
+    let steps: Vec<_> = json_lines(&o)[..4].iter().map(|l| l["records_stepped"].as_u64()).collect();
+    assert!(
+        steps.iter().all(|&s| s > Some(0)),
+        "every frame must learn for the test to mean anything: {steps:?}"
+    );
+    for k in 0..4 {
+        assert!(state(&whole, k).exists(), "no state after frame {k}");
+    }
+
+    let a = optimized_sequence(&cut, &[]);
+    let a: Vec<&str> = a.iter().map(String::as_str).collect();
+    let (code, _, err) = interrupt_at(&a, "frame 1 written", "frame 1 written", Duration::ZERO);
+    assert_eq!(code, Some(130), "{err}");
+    assert!(!frame(&cut, "c", 2).exists() && state(&cut, 1).exists() && !state(&cut, 2).exists());
+    let o = ok(run_sequence(&cut, &["--resume"], None));
+    let last = &json_lines(&o)[4];
+    assert_eq!(
+        (last["resumed"].clone(), last["rendered"].clone()),
+        (serde_json::json!([0, 1]), serde_json::json!([2, 3]))
+    );
+    assert_same_frames(&cut, &whole, "resumed after frame 1");
+    for k in 0..4 {
+        assert_eq!(
+            std::fs::read(state(&cut, k)).unwrap(),
+            std::fs::read(state(&whole, k)).unwrap(),
+            "state {k}"
+        );
+    }
+    std::fs::remove_dir_all(&whole).ok();
+    std::fs::remove_dir_all(&cut).ok();
+}
+
+/// A state that cannot be used (corrupt, missing, of other settings) makes `--resume`
+/// render its frame again from the state before it, with a note naming the file and
+/// why: the files still equal the uninterrupted run's. A failed state write (test hook)
+/// is an error naming the frame, and leaves the file that was there, whole, with no
+/// temporary file beside it.
+#[test]
+fn unusable_or_unwritable_states_never_change_the_frames() {
+    let (whole, dir) = (temp_dir("state-whole"), temp_dir("state-bad"));
+    ok(run_sequence(&whole, &[], None));
+    let copy = |k: u32| {
+        for p in [frame(&whole, "c", k), frame(&whole, "c", k).with_extension("png"), state(&whole, k)] {
+            std::fs::copy(&p, dir.join(p.file_name().unwrap())).unwrap();
+        }
+    };
+    (0..3).for_each(copy);
+    std::fs::write(state(&dir, 2), "{\"frame\": 2, \"width\": 16").unwrap();
+    let o = ok(run_sequence(&dir, &["--resume"], None));
+    let err = stderr(&o);
+    assert!(
+        err.contains("frame 2 is rendered again")
+            && err.contains("c.0002.vpl-state.json")
+            && err.contains("corrupt"),
+        "{err}"
+    );
+    assert_eq!(json_lines(&o)[4]["rendered"], serde_json::json!([2, 3]));
+    assert_same_frames(&dir, &whole, "after a corrupt state");
+
+    // Frame 2 gone, the state after frame 1 missing, the one after frame 0 of other
+    // settings: everything again.
+    std::fs::remove_file(frame(&dir, "c", 2)).unwrap();
+    std::fs::remove_file(state(&dir, 1)).unwrap();
+    let other = std::fs::read_to_string(state(&dir, 0)).unwrap().replace("seed=0", "seed=7");
+    std::fs::write(state(&dir, 0), other).unwrap();
+    let o = ok(run_sequence(&dir, &["--resume"], None));
+    let err = stderr(&o);
+    assert!(err.contains("c.0001.vpl-state.json, is not on disk"), "{err}");
+    assert!(err.contains("c.0000.vpl-state.json, was written with other settings"), "{err}");
+    assert_eq!(json_lines(&o)[4]["rendered"], serde_json::json!([0, 1, 2, 3]));
+    assert_same_frames(&dir, &whole, "after missing and foreign states");
+
+    std::fs::write(state(&dir, 2), "the previous state file").unwrap();
+    std::fs::remove_file(frame(&dir, "c", 3)).unwrap();
+    let o = run_sequence(&dir, &[], Some(("FILTRACE_TEST_FAIL", "state 2")));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("frame 2: cannot write the state"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("c.0002.vpl-state.json"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(state(&dir, 2)).unwrap(), "the previous state file");
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.contains("tmp")), "a temporary file was left: {names:?}");
+    assert!(!frame(&dir, "c", 3).exists(), "frame 3 was rendered after the failed write");
+    let o = ok(run_sequence(&dir, &["--resume"], None));
+    assert_eq!(json_lines(&o)[4]["rendered"], serde_json::json!([2, 3]), "{}", stderr(&o));
+    assert_same_frames(&dir, &whole, "after a failed state write");
+    std::fs::remove_dir_all(&whole).ok();
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -15,6 +15,8 @@
 //! - [`seam`]: plugging it into a [`filtrace_render::Renderer`] and rendering a frame in
 //!   progressive passes ([`render_vpl_frame`], [`render_vpl_passes`]).
 //! - `soa`: the cache's evaluation of eight VPLs at a time (structure of arrays).
+//! - [`state`]: what the integrator carries from frame to frame ([`VplState`], serde),
+//!   so that a sequence resumed after a frame continues exactly.
 //! - [`rays`]: shadow rays counted (and sampled for replay) for the experiments' clocks.
 //!
 //! A VPL's `weight` already holds every Monte Carlo normalisation (selection probability,
@@ -29,6 +31,7 @@ pub mod integrator;
 pub mod rays;
 pub mod seam;
 mod soa;
+pub mod state;
 
 #[cfg(test)]
 mod tests;
@@ -38,6 +41,7 @@ pub use exhaustive::{exhaustive_pixel, render_exhaustive, ExhaustiveImage, Scene
 pub use generate::{generate_vpls, VplParams};
 pub use integrator::{frame_vpl_seed, StageTimes, VplIntegrator, VplReport, VplSettings};
 pub use seam::{collect_frame, render_vpl_frame, render_vpl_passes, use_vpl_integrator, VplFrame};
+pub use state::{carries_state, VplState, STATE_VERSION};
 
 use filtrace_core::sampling::Frame;
 use filtrace_core::{Rgb, Vec3};

@@ -8,8 +8,9 @@
 //! `render_vpl` (the many-light renderer) and `sequence` (frames of an animation, with any
 //! of them).
 //!
-//! Options that parse but do not combine (`--filter` with `--integrator vpl`, ...) are a
-//! usage error, exit code 2 as clap's own, found before anything is loaded.
+//! Options that parse but do not combine (`--filter` with `--integrator vpl`, a VPL option
+//! such as `--vpl-sampler` without it, ...) are a usage error, exit code 2 as clap's own,
+//! found before anything is loaded.
 
 pub use super::render_args::{parse_resolution, CommonArgs, Resolution};
 use super::render_filtered::{AdaptiveArgs, FilterArgs};
@@ -29,6 +30,31 @@ pub struct Args {
     pub sequence: SequenceArgs,
     #[command(flatten)]
     pub vpl: super::render_vpl::VplArgs,
+    /// The VPL options given on the command line, as opposed to their defaults
+    /// ([`explicit_vpl_options`]; filled by `main`, which holds the parsed matches).
+    #[arg(skip)]
+    pub explicit_vpl: Vec<&'static str>,
+}
+
+/// The options of the many-light renderer (clap id, flag, what it does): given without
+/// `--integrator vpl`, the path tracer would render and silently ignore them.
+const VPL_OPTIONS: [(&str, &str, &str); 6] = [
+    ("vpls", "--vpls", "it sets the number of VPLs"),
+    ("vpl_sampler", "--vpl-sampler", "it chooses how the importance cache samples the VPLs"),
+    ("cache_points", "--cache-points", "it sets the importance cache's points"),
+    ("cache_neighbours", "--cache-neighbours", "it sets the records interpolated per shading point"),
+    ("ground_truth", "--ground-truth", "it is the exhaustive sum over the VPLs"),
+    ("vpl_clamp", "--vpl-clamp", "it bounds the VPLs' geometry term"),
+];
+
+/// The VPL options `matches` (of `filtrace render`) got from the command line rather than
+/// from their defaults (clap's value source), as their flags.
+pub fn explicit_vpl_options(matches: &clap::ArgMatches) -> Vec<&'static str> {
+    VPL_OPTIONS
+        .iter()
+        .filter(|(id, ..)| matches.value_source(id) == Some(clap::parser::ValueSource::CommandLine))
+        .map(|&(_, flag, _)| flag)
+        .collect()
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -51,45 +77,59 @@ impl Args {
     /// Refuses options that parse but do not combine, naming them (a `clap::Error`, which
     /// `main` turns into exit code 2).
     fn check_combinations(&self) -> Result<(), clap::Error> {
-        let conflicts: Vec<(bool, &str, &str)> = if self.vpl.enabled() {
-            vec![
-                (
-                    self.filter.enabled(),
-                    "the argument '--filter' cannot be used with '--integrator vpl'",
-                    "the many-light renderer has no filtered pipeline; denoise its EXR with `filtrace denoise`",
-                ),
-                (
-                    self.adaptive.adaptive,
-                    "the argument '--adaptive' cannot be used with '--integrator vpl'",
-                    "adaptive sampling drives the filtered pipeline",
-                ),
-                (
-                    self.common.trace.is_some(),
-                    "the argument '--trace' cannot be used with '--integrator vpl'",
-                    "it chooses how the path tracer walks its paths; the VPL integrator has one way",
-                ),
-            ]
-        } else {
-            vec![
-                (
-                    self.vpl.ground_truth,
-                    "the argument '--ground-truth' needs '--integrator vpl'",
-                    "it is the exhaustive sum over the VPLs",
-                ),
-                (
-                    self.vpl.vpl_clamp.is_some(),
-                    "the argument '--vpl-clamp' needs '--integrator vpl'",
-                    "it bounds the VPLs' geometry term",
-                ),
-            ]
-        };
+        if !self.vpl.enabled() {
+            return self.check_vpl_options_need_vpl();
+        }
+        let conflicts = [
+            (
+                self.filter.enabled(),
+                "the argument '--filter' cannot be used with '--integrator vpl'",
+                "the many-light renderer has no filtered pipeline; denoise its EXR with `filtrace denoise`",
+            ),
+            (
+                self.adaptive.adaptive,
+                "the argument '--adaptive' cannot be used with '--integrator vpl'",
+                "adaptive sampling drives the filtered pipeline",
+            ),
+            (
+                self.common.trace.is_some(),
+                "the argument '--trace' cannot be used with '--integrator vpl'",
+                "it chooses how the path tracer walks its paths; the VPL integrator has one way",
+            ),
+        ];
         match conflicts.iter().find(|(given, ..)| *given) {
-            Some((_, what, why)) => {
-                Err(clap::Error::raw(clap::error::ErrorKind::ArgumentConflict, format!("{what}: {why}\n")))
-            }
+            Some((_, what, why)) => Err(usage_error(format!("{what}: {why}"))),
             None => Ok(()),
         }
     }
+
+    /// Without `--integrator vpl`, the VPL options given on the command line are refused,
+    /// all of them named: the path tracer would ignore them.
+    fn check_vpl_options_need_vpl(&self) -> Result<(), clap::Error> {
+        let given: Vec<_> =
+            VPL_OPTIONS.iter().filter(|(_, flag, _)| self.explicit_vpl.contains(flag)).collect();
+        let message = match given[..] {
+            [] => return Ok(()),
+            [(_, flag, why)] => format!(
+                "the argument '{flag}' needs '--integrator vpl': {why} of the many-light renderer, \
+                 which the path tracer would ignore; add --integrator vpl to render with it"
+            ),
+            _ => {
+                let flags: Vec<String> = given.iter().map(|(_, flag, _)| format!("'{flag}'")).collect();
+                format!(
+                    "the arguments {} need '--integrator vpl': they are options of the many-light \
+                     renderer, which the path tracer would ignore; add --integrator vpl to render with them",
+                    flags.join(", ")
+                )
+            }
+        };
+        Err(usage_error(message))
+    }
+}
+
+/// A usage error (exit code 2 in `main`, as clap's own).
+fn usage_error(message: String) -> clap::Error {
+    clap::Error::raw(clap::error::ErrorKind::ArgumentConflict, format!("{message}\n"))
 }
 
 #[cfg(test)]
@@ -114,6 +154,30 @@ mod tests {
         let exr = filtrace_io::read_exr(&out).unwrap();
         std::fs::remove_dir_all(&dir).ok();
         exr
+    }
+
+    /// A VPL option counts as given when it is on the command line, even at its default
+    /// value; without `--integrator vpl` the error names every one given.
+    #[test]
+    fn vpl_options_given_without_the_vpl_integrator_are_refused() {
+        use clap::CommandFactory;
+        let check = |argv: &[&str]| {
+            let m = Cli::command().try_get_matches_from(argv).unwrap();
+            let mut a = Cli::try_parse_from(argv).unwrap().args;
+            a.explicit_vpl = super::explicit_vpl_options(&m);
+            a.check_combinations().map_err(|e| e.to_string())
+        };
+        assert!(check(&["t", "cornell", "--spp", "2"]).is_ok(), "defaults are not given");
+        assert!(check(&["t", "--integrator", "vpl", "--vpls", "64", "--ground-truth"]).is_ok());
+        let one = check(&["t", "--vpls", "2048"]).unwrap_err();
+        assert!(
+            one.contains("'--vpls' needs '--integrator vpl'") && one.contains("add --integrator vpl"),
+            "{one}"
+        );
+        let two =
+            check(&["t", "--integrator", "path", "--cache-neighbours", "3", "--vpl-sampler", "balance"]);
+        let two = two.unwrap_err();
+        assert!(two.contains("'--vpl-sampler', '--cache-neighbours' need '--integrator vpl'"), "{two}");
     }
 
     #[test]

@@ -88,6 +88,13 @@ pub fn test_hook(stage: &str, cancel: &AtomicBool) {
     }
 }
 
+/// Test hook for tests/vpl_sequence.rs: true when the environment's `FILTRACE_TEST_FAIL`
+/// names `what` (e.g. `state 2`, the state file after frame 2), whose write then fails
+/// midway, as a full disk would make it.
+pub fn test_failure(what: &str) -> bool {
+    std::env::var_os("FILTRACE_TEST_FAIL").is_some_and(|v| v == what)
+}
+
 /// A progress bar on stderr when it is a terminal, hidden otherwise.
 pub fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
     if !std::io::stderr().is_terminal() {

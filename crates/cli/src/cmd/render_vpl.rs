@@ -8,7 +8,9 @@
 //! the thesis's Figure 27) and the PNG; prints a summary with the milliseconds per stage.
 //!
 //! [`VplRun`] renders one frame; `sequence` uses it for `--frames` with one integrator
-//! carried from frame to frame, so that the `optimized` parameters carry over.
+//! carried from frame to frame, so that the `optimized` parameters carry over, and writes
+//! their state after each frame so that `--resume` continues exactly
+//! (filtrace_vpl::vpls::state).
 
 use super::render_args::CommonArgs;
 use super::render_output::{render_attributes, write_outputs, Written};
@@ -19,9 +21,10 @@ use filtrace_core::Image;
 use filtrace_render::Renderer;
 use filtrace_vpl::cache::{CacheParams, SamplerKind};
 use filtrace_vpl::vpls::seam::frame_memory;
+use filtrace_vpl::vpls::seam::resume_vpl_integrator;
 use filtrace_vpl::vpls::{
     collect_frame, frame_vpl_seed, use_vpl_integrator, GeometryBound, VplFrame, VplIntegrator, VplParams,
-    VplReport, VplSettings,
+    VplReport, VplSettings, VplState,
 };
 use serde::Serialize;
 use std::io::Write;
@@ -92,6 +95,12 @@ impl VplArgs {
         Ok(s)
     }
 
+    /// Whether the integrator carries state from frame to frame (`optimized`): a frame of
+    /// a sequence then depends on the frames before it, and `--resume` needs their state.
+    pub fn carries_state(&self) -> bool {
+        self.enabled() && self.vpl_sampler == SamplerKind::Optimized && !self.ground_truth
+    }
+
     /// Everything but the frame that decides a frame's pixels, for a sequence's header:
     /// the pass size too, since `optimized` learns after each pass.
     pub fn stamp(&self, pass_spp: u32) -> String {
@@ -125,6 +134,9 @@ pub struct VplRun<'a> {
     pub settings: VplSettings,
     pub pool: &'a rayon::ThreadPool,
     pub cancel: &'a AtomicBool,
+    /// The state of the frame before the first one rendered (a resumed sequence), handed
+    /// to the integrator when it is set.
+    pub carried: Option<VplState>,
 }
 
 /// The JSON summary of one VPL frame (`--json`).
@@ -174,15 +186,28 @@ impl VplRun<'_> {
     /// the sequence does not move, is moved to the frame number here so that its VPLs
     /// follow it too ([`frame_vpl_seed`]); the integrator is set the first time (which
     /// prepares it) and then kept, so every later frame update prepares the same one and
-    /// the `optimized` parameters carry over (thesis 5.2.2).
-    pub fn prepare(&self, renderer: &mut Renderer, frame: i64) -> anyhow::Result<()> {
+    /// the `optimized` parameters carry over (thesis 5.2.2); with [`VplRun::carried`], the
+    /// first frame continues from that state as if the frame before had been rendered.
+    pub fn prepare(&mut self, renderer: &mut Renderer, frame: i64) -> anyhow::Result<()> {
         if renderer.frame().index != frame {
             self.pool.install(|| renderer.prepare_frame(frame)).with_context(|| format!("frame {frame}"))?;
         }
         if renderer.integrator_as::<VplIntegrator>().is_none() {
-            self.pool.install(|| use_vpl_integrator(renderer, &self.settings)).map_err(anyhow::Error::msg)?;
+            let (settings, carried) = (&self.settings, self.carried.take());
+            self.pool
+                .install(|| match &carried {
+                    Some(state) => resume_vpl_integrator(renderer, settings, state),
+                    None => use_vpl_integrator(renderer, settings),
+                })
+                .map_err(|e| anyhow::anyhow!("frame {frame}: {e}"))?;
         }
         Ok(())
+    }
+
+    /// What the integrator carries into the next frame (`None` when nothing:
+    /// [`VplArgs::carries_state`]).
+    pub fn state(&self, renderer: &Renderer) -> Option<VplState> {
+        renderer.integrator_as::<VplIntegrator>().and_then(VplIntegrator::state)
     }
 
     /// Renders the prepared frame in progressive passes and writes it to `out` (header:
@@ -272,7 +297,7 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     let mut renderer =
         pool.install(|| Renderer::new(scene, settings.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
     let vs = v.settings(renderer.lights().scene_radius())?;
-    let run = VplRun { c, settings: vs, pool: &pool, cancel: ctrlc.flag() };
+    let mut run = VplRun { c, settings: vs, pool: &pool, cancel: ctrlc.flag(), carried: None };
     // The integrator's `prepare`: VPLs, G-buffer and importance cache of the frame.
     let frame = renderer.frame().index;
     run.prepare(&mut renderer, frame)?;

@@ -17,7 +17,11 @@
 //! that frame follows the still render's rules (written if complete enough, its header
 //! saying it was cut short); every finished frame stays, the preview shows the frames on
 //! disk, and the command exits with code 130. `--resume` keeps the frames already on disk
-//! that are finished with the same settings (sequence_files) and renders the others.
+//! that are finished with the same settings (sequence_files) and renders the others; when
+//! each frame continues the state of the one before (VPL `optimized`), the state is written
+//! beside each finished frame and `--resume` keeps the finished frames up to the last whose
+//! state it can read, then continues from that state: the files are those of an
+//! uninterrupted run.
 
 use anyhow::Context;
 use serde::Serialize;
@@ -32,7 +36,8 @@ use super::render_filtered::{build_pipeline_traced, AdaptiveArgs, FilterArgs, Fi
 use super::render_plain::{build_renderer, LoadReport, PlainRun};
 use super::render_session::{check_memory, multi_progress, progress_bar, test_hook, CtrlC, Interrupted};
 use super::render_vpl::{VplArgs, VplRun};
-use super::sequence_files::{frame_path, preview_path, FrameStamp};
+use super::sequence_files::{frame_path, keep_on_resume, preview_path, state_path, FrameStamp};
+use filtrace_vpl::vpls::VplState;
 
 /// Largest frame number accepted.
 pub const MAX_FRAME: u64 = 9_999_999;
@@ -161,6 +166,11 @@ impl<'a> Method<'a> {
         Ok(Method::Plain)
     }
 
+    /// Whether a frame depends on the frames before it (the VPL integrator's state).
+    fn carries_state(&self) -> bool {
+        matches!(self, Method::Vpl(v) if v.carries_state())
+    }
+
     /// The method as a frame's settings stamp says it.
     fn stamp(&self, common: &CommonArgs, filter: &FilterArgs, adaptive: &AdaptiveArgs) -> String {
         match self {
@@ -227,7 +237,18 @@ impl Engine<'_> {
             }
             Engine::Vpl(run, renderer) => {
                 run.prepare(renderer, stamp.frame as i64)?;
-                run.render_frame(renderer, out, &attributes, bar)?.map(|s| Rendered {
+                let summary = run.render_frame(renderer, out, &attributes, bar)?;
+                let finished = summary.as_ref().is_some_and(|s| !s.cancelled);
+                if let Some(state) = finished.then(|| run.state(renderer)).flatten() {
+                    stamp.write_state(&state_path(out), &state).with_context(|| {
+                        format!(
+                            "frame {}: cannot write the state the next frame continues from; the frames \
+                             written so far stay and --resume continues from the last state on disk",
+                            stamp.frame
+                        )
+                    })?;
+                }
+                summary.map(|s| Rendered {
                     note: super::render_vpl::cancelled_note(&s),
                     output: out.to_path_buf(),
                     cancelled: s.cancelled,
@@ -284,11 +305,11 @@ pub fn run(
     let start = Instant::now();
     let method = Method::choose(common, filter, adaptive, vpl)?;
     let stamp = method.stamp(common, filter, adaptive);
-    let (sequence, load) = prepare(common, seq, &stamp, matches!(method, Method::Vpl(_)))?;
+    let (sequence, load, carried) = prepare(common, seq, &stamp, &method)?;
     let first = sequence.frames.iter().find(|(_, keep)| !keep).map(|(s, _)| s.frame as i64);
     let mut engine = match first {
         None => None,
-        Some(f) => Some(sequence.engine(method, f, adaptive, &load)?),
+        Some(f) => Some(sequence.engine(method, f, adaptive, &load, carried)?),
     };
     test_hook("built", sequence.ctrlc.flag());
     sequence.ctrlc.arm();
@@ -299,13 +320,15 @@ pub fn run(
 }
 
 /// Everything before the first frame: load the scene, resolve the frames against its
-/// animation, check the outputs, look at what `--resume` can keep.
+/// animation, check the outputs, look at what `--resume` can keep (and, for a method that
+/// carries state, the state the first frame to render continues from).
 fn prepare<'a>(
     common: &'a CommonArgs,
     seq: &SequenceArgs,
-    method: &str,
-    vpl: bool,
-) -> anyhow::Result<(Sequence<'a>, LoadReport)> {
+    stamp: &str,
+    method: &Method,
+) -> anyhow::Result<(Sequence<'a>, LoadReport, Option<VplState>)> {
+    let (vpl, carries) = (matches!(method, Method::Vpl(_)), method.carries_state());
     // First: until the render starts, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
     let t0 = Instant::now();
@@ -315,9 +338,9 @@ fn prepare<'a>(
     let source = FrameSource::new(scene);
     let numbers = seq.frame_numbers(&common.scene, source.clock())?;
     let out = common.prepare_output()?;
-    for path in
-        [frame_path(&out, numbers[0]), frame_path(&out, numbers[0]).with_extension("png"), preview_path(&out)]
-    {
+    let first = frame_path(&out, numbers[0]);
+    let state = carries.then(|| state_path(&first));
+    for path in [first.clone(), first.with_extension("png"), preview_path(&out)].into_iter().chain(state) {
         filtrace_io::check_writable(&path).context("the output cannot be written (see --out)")?;
     }
     if !common.json {
@@ -333,26 +356,27 @@ fn prepare<'a>(
             ),
         }
     }
-    let settings = format!(
-        "scene={} spp={:?} max_depth={} seed={} exposure={} filmic={} render={method}",
+    let mut settings = format!(
+        "scene={} spp={:?} max_depth={} seed={} exposure={} filmic={} render={stamp}",
         common.scene, common.spp, common.max_depth, common.seed, common.exposure, common.filmic
     );
-    let frames = numbers
+    // A frame that continues the frames before it depends on where the sequence started.
+    if carries {
+        settings.push_str(&format!(" carried_from={}", numbers[0]));
+    }
+    let stamps: Vec<FrameStamp> = numbers
         .into_iter()
-        .map(|frame| {
-            let stamp = FrameStamp {
-                frame,
-                time_s: source.time_of(frame as i64),
-                width: common.res.width,
-                height: common.res.height,
-                settings: settings.clone(),
-            };
-            let keep = seq.resume && stamp.check_finished(&frame_path(&out, frame)).is_ok();
-            (stamp, keep)
+        .map(|frame| FrameStamp {
+            frame,
+            time_s: source.time_of(frame as i64),
+            width: common.res.width,
+            height: common.res.height,
+            settings: settings.clone(),
         })
         .collect();
+    let (frames, carried) = keep_on_resume(stamps, &out, seq.resume, carries);
     let pool = common.thread_pool()?;
-    Ok((Sequence { common, source, out, frames, ctrlc, pool }, load))
+    Ok((Sequence { common, source, out, frames, ctrlc, pool }, load, carried))
 }
 
 impl Sequence<'_> {
@@ -363,6 +387,7 @@ impl Sequence<'_> {
         first: i64,
         adaptive: &'s AdaptiveArgs,
         load: &'s LoadReport,
+        carried: Option<VplState>,
     ) -> anyhow::Result<Engine<'s>> {
         let (common, pool, flag) = (self.common, &self.pool, self.ctrlc.flag());
         let scene = self.source.scene_at(first)?;
@@ -382,7 +407,7 @@ impl Sequence<'_> {
             Method::Vpl(v) => {
                 let renderer = build_renderer(scene, common, pool)?;
                 let settings = v.settings(renderer.lights().scene_radius())?;
-                Engine::Vpl(VplRun { c: common, settings, pool, cancel: flag }, Box::new(renderer))
+                Engine::Vpl(VplRun { c: common, settings, pool, cancel: flag, carried }, Box::new(renderer))
             }
         })
     }

@@ -225,9 +225,9 @@ impl VplCdf {
 pub struct ImportanceCache {
     pub(crate) records: Vec<CacheRecord>,
     pub(crate) params: Vec<RecordParams>,
-    tree: KdTree,
+    pub(crate) tree: KdTree,
     pub(crate) config: CacheParams,
-    vpl_count: usize,
+    pub(crate) vpl_count: usize,
 }
 
 impl ImportanceCache {

@@ -144,6 +144,17 @@ impl VplIntegrator {
         self.frame.cache.read().unwrap_or_else(PoisonError::into_inner).clone()
     }
 
+    /// `f` of the current importance cache, read in place (no copy of its distributions).
+    pub fn with_cache<R>(&self, f: impl FnOnce(Option<&ImportanceCache>) -> R) -> R {
+        f(self.frame.cache.read().unwrap_or_else(PoisonError::into_inner).as_ref())
+    }
+
+    /// Sets the cache the next `prepare` carries the `optimized` parameters from, as if the
+    /// frame before had ended with it (a resumed sequence, [`super::state`]).
+    pub fn set_previous_cache(&mut self, cache: Option<ImportanceCache>) {
+        *self.frame.cache.get_mut().unwrap_or_else(PoisonError::into_inner) = cache;
+    }
+
     pub fn report(&self) -> VplReport {
         let learning = self.learning.lock().unwrap_or_else(PoisonError::into_inner);
         let mut times = self.frame.times;

@@ -2,7 +2,8 @@
 //! (`bench_input::synthetic_input`), for A/B runs while optimising: prints the median
 //! wall-clock ms and the median CPU ms (all threads) of `REPEATS` calls after one warm-up.
 //!
-//! `cargo run --release -p filtrace-denoise --example filter_time -- atrous|guided [REPEATS]`
+//! `cargo run --release -p filtrace-denoise --example filter_time -- atrous|guided|guided1 [REPEATS]`
+//! (`guided`: 4 channels, r = 32; `guided1`: 1 channel, r = 24)
 //! (threads: `RAYON_NUM_THREADS`). The reported numbers are `filtrace bench filters`'.
 
 use filtrace_denoise::bench_input::synthetic_input;
@@ -29,6 +30,8 @@ fn main() {
             guidance: Guidance::NormalDepth,
             ..GuidedParams::paper()
         }),
+        // The `bench filters` row "guided, 1 dimension, radius 24".
+        "guided1" => Filter::Guided(GuidedParams { radius: 24, ..GuidedParams::grey() }),
         _ => Filter::Atrous(AtrousParams::paper()),
     };
     let (color, g) = synthetic_input(1920, 1080);

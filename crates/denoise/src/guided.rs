@@ -39,6 +39,7 @@
 //! not show (shadows, texture) are smoothed away: filter demodulated illumination.
 
 use crate::error::{invalid, DenoiseError};
+use crate::fused::{fused_box_sums, fused_runs, OnRows, Rows};
 use crate::gbuffer::{check_color, depth_scale, is_valid_color, surface_at, GBuffer};
 use crate::pool::Buf;
 use crate::simd::Isa;
@@ -141,9 +142,34 @@ pub(crate) fn guided_with_isa(
     params: &GuidedParams,
     isa: Isa,
 ) -> Result<Image, DenoiseError> {
+    guided_with_plan(color, guide, params, isa, Plan::Auto)
+}
+
+/// [`guided`] with the instruction set and the plan of the box passes chosen by the caller.
+#[cfg(test)]
+pub(crate) fn guided_with_plan(
+    color: &Image,
+    guide: &GBuffer,
+    params: &GuidedParams,
+    isa: Isa,
+    plan: Plan,
+) -> Result<Image, DenoiseError> {
     let mut out = Image::new(color.width(), color.height(), 3);
-    guided_into_isa(color, guide, params, &mut out, isa)?;
+    guided_into_isa(color, guide, params, &mut out, (isa, plan))?;
     Ok(out)
+}
+
+/// How the two box passes run: fused ([`crate::fused`]) in `runs` parallel walks, or one
+/// after the other over the whole coefficient plane. Same bits either way (tested).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(not(test), allow(dead_code))] // the tests force each plan
+pub(crate) enum Plan {
+    /// Fused while the threads are fewer than the bands ([`fused_runs`]).
+    Auto,
+    TwoPasses,
+    Fused {
+        runs: usize,
+    },
 }
 
 /// [`guided`] writing into `out` (resized when it differs).
@@ -153,7 +179,7 @@ pub fn guided_into(
     params: &GuidedParams,
     out: &mut Image,
 ) -> Result<(), DenoiseError> {
-    guided_into_isa(color, guide, params, out, crate::simd::isa())
+    guided_into_isa(color, guide, params, out, (crate::simd::isa(), Plan::Auto))
 }
 
 fn guided_into_isa(
@@ -161,7 +187,7 @@ fn guided_into_isa(
     guide: &GBuffer,
     params: &GuidedParams,
     out: &mut Image,
-    isa: Isa,
+    how: (Isa, Plan),
 ) -> Result<(), DenoiseError> {
     check_color(color)?;
     params.validate()?;
@@ -182,10 +208,10 @@ fn guided_into_isa(
     let (en, ed) = (params.eps_normal, params.eps_depth);
     let r = params.radius as usize;
     match params.guidance {
-        Guidance::GreyNormal => guided_impl::<1, { k1(1) }, { k2(1) }>(color, guide, r, [en], out, isa),
-        Guidance::Normal => guided_impl::<3, { k1(3) }, { k2(3) }>(color, guide, r, [en; 3], out, isa),
+        Guidance::GreyNormal => guided_impl::<1, { k1(1) }, { k2(1) }>(color, guide, r, [en], out, how),
+        Guidance::Normal => guided_impl::<3, { k1(3) }, { k2(3) }>(color, guide, r, [en; 3], out, how),
         Guidance::NormalDepth => {
-            guided_impl::<4, { k1(4) }, { k2(4) }>(color, guide, r, [en, en, en, ed], out, isa)
+            guided_impl::<4, { k1(4) }, { k2(4) }>(color, guide, r, [en, en, en, ed], out, how)
         }
     }
     Ok(())
@@ -363,7 +389,7 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     r: usize,
     eps: [f32; D],
     out: &mut Image,
-    isa: Isa,
+    (isa, plan): (Isa, Plan),
 ) {
     let (w, h) = (color.width(), color.height());
     let st = Strips::new(w, h, r);
@@ -371,13 +397,27 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     // Pass 1: window statistics -> per-window coefficients (a_k, b_k) (eqs. 8-9), written per
     // row as `len` positions of K2 vectors.
     let coef_row = st.len * K2 * S;
-    let mut coef = Buf::uninit(h * coef_row);
     let inside: Vec<V> = (0..st.len).map(|j| st.inside(j)).collect();
     let pass1 = Pass1::<D> { inputs: &inputs, eps, inside: &inside };
-    strip_box_sums::<K1, _>(&st, &mut coef, coef_row, &pass1, isa);
     // Pass 2: average the coefficients over the windows covering each pixel and apply them.
-    let pass2 = Pass2::<D, K2> { inputs: &inputs, coef: &coef, row: coef_row, range: inputs.fit_range() };
-    strip_box_sums::<K2, _>(&st, out.data_mut(), 3 * w, &pass2, isa);
+    let apply = Apply::<D> { inputs: &inputs, range: inputs.fit_range() };
+    let runs = match plan {
+        Plan::Auto => fused_runs(&st, rayon::current_num_threads()),
+        Plan::TwoPasses => None,
+        Plan::Fused { runs } => Some(runs),
+    };
+    let out = out.data_mut();
+    match runs {
+        Some(runs) => {
+            fused_box_sums::<K1, K2, _, _>(&st, (&pass1, coef_row), &apply, (out, 3 * w), runs, isa)
+        }
+        None => {
+            let mut coef = Buf::uninit(h * coef_row);
+            strip_box_sums::<K1, _>(&st, &mut coef, coef_row, &pass1, isa);
+            let pass2 = <Apply<D> as OnRows<K2>>::on(&apply, Rows::block(&coef, coef_row, 0));
+            strip_box_sums::<K2, _>(&st, out, 3 * w, &pass2, isa);
+        }
+    }
 }
 
 struct Pass1<'a, const D: usize> {
@@ -472,19 +512,34 @@ impl<const D: usize, const K1: usize> StripPass<K1> for Pass1<'_, D> {
     }
 }
 
+/// What pass 2 needs beside the coefficients.
+struct Apply<'a, const D: usize> {
+    inputs: &'a Inputs<D>,
+    /// Per channel, `[min, max]` of the fit pixels' colours: outputs are clamped to it.
+    range: [[f32; 2]; 3],
+}
+
+impl<'a, const D: usize, const K2: usize> OnRows<K2> for Apply<'a, D> {
+    type Pass<'r>
+        = Pass2<'r, D, K2>
+    where
+        Self: 'r;
+    fn on<'r>(&'r self, coef: Rows<'r>) -> Pass2<'r, D, K2> {
+        Pass2 { inputs: self.inputs, coef, range: self.range }
+    }
+}
+
 struct Pass2<'a, const D: usize, const K2: usize> {
     inputs: &'a Inputs<D>,
-    coef: &'a [f32],
-    /// Values per coefficient row.
-    row: usize,
-    /// Per channel, `[min, max]` of the fit pixels' colours: outputs are clamped to it.
+    /// The coefficient rows (a plane, a block of it or a ring: [`crate::fused`]).
+    coef: Rows<'a>,
     range: [[f32; 2]; 3],
 }
 
 impl<const D: usize, const K2: usize> StripPass<K2> for Pass2<'_, D, K2> {
     #[inline(always)]
     fn update(&self, j: usize, y_add: Option<usize>, y_sub: Option<usize>, col: &mut [V; K2]) {
-        let coef = |y: usize| &self.coef[y * self.row + j * K2 * S..][..K2 * S];
+        let coef = |y: usize| &self.coef.get(y)[j * K2 * S..][..K2 * S];
         let c = col.as_flattened_mut();
         // Flat loops over the K2 * S values (see `stripbox::add`).
         match (y_add, y_sub) {

@@ -38,6 +38,7 @@ pub mod bilateral;
 mod chains;
 pub mod demodulate;
 pub mod error;
+mod fused;
 pub mod gbuffer;
 pub mod guided;
 mod kernel;

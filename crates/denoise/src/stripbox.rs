@@ -104,7 +104,7 @@ impl Strips {
 /// Rows per parallel band: at least four window heights and 64 rows, so that the `2r+1`
 /// start-up rows of a band cost at most about an eighth of its sliding work. Independent of
 /// the thread count; a 1080-row image at r = 32 has 4 bands.
-fn band_rows(h: usize, r: usize) -> usize {
+pub(crate) fn band_rows(h: usize, r: usize) -> usize {
     // Equal bands (as many as fit at that height), so 2 threads stay balanced.
     let bands = (h / (4 * (2 * r + 1)).max(64)).max(1);
     h.div_ceil(bands).max(1)
@@ -223,29 +223,44 @@ fn slide<const K: usize, P: StripPass<K>>(st: &Strips, y: usize, j0: usize, col:
     }
 }
 
-/// The work of rows `y0..y0 + rows` (`out` holds them): a whole band (`init` `None`: its
-/// column sums start from the direct sum) or a sub-band (`init`: the replayed column sums of
-/// its first row, `len` positions of `K` vectors).
-#[inline(always)]
-fn band<const K: usize, P: StripPass<K>>(
-    st: &Strips,
-    y0: usize,
-    init: Option<&[f32]>,
-    out: &mut [f32],
-    row_len: usize,
-    pass: &P,
-) {
-    let (r, len) = (st.r, st.len);
-    let rows = out.len() / row_len;
-    let y1 = y0 + rows;
-    // Column sums at positions -r..len + r (halo included).
-    let mut buf = crate::pool::Buf::zeros((len + 2 * r) * K * S);
-    let col: &mut [[V; K]] = vecs_mut(&mut buf).as_chunks_mut::<K>().0;
-    match init {
-        Some(state) => col[r..r + len].as_flattened_mut().as_flattened_mut().copy_from_slice(state),
-        None => start_sums(st, y0, 0, &mut col[r..r + len], pass),
+/// The column sums of a band (or sub-band) between two of its rows: [`band`] row by row,
+/// so that [`crate::fused`] can interleave two passes.
+pub(crate) struct Cursor<const K: usize> {
+    /// Column sums at positions `-r..len + r` (halo included).
+    buf: crate::pool::Buf,
+    /// The next row, the band's end.
+    y: usize,
+    y1: usize,
+}
+
+impl<const K: usize> Cursor<K> {
+    /// At row `y0` of the band `y0..y1`: a whole band (`init` `None`: its column sums start
+    /// from the direct sum) or a sub-band (`init`: the replayed column sums of its first row,
+    /// `len` positions of `K` vectors).
+    #[inline(always)]
+    pub fn new<P: StripPass<K>>(st: &Strips, y0: usize, y1: usize, init: Option<&[f32]>, pass: &P) -> Self {
+        let (r, len) = (st.r, st.len);
+        let mut buf = crate::pool::Buf::zeros((len + 2 * r) * K * S);
+        let col: &mut [[V; K]] = vecs_mut(&mut buf).as_chunks_mut::<K>().0;
+        match init {
+            Some(state) => col[r..r + len].as_flattened_mut().as_flattened_mut().copy_from_slice(state),
+            None => start_sums(st, y0, 0, &mut col[r..r + len], pass),
+        }
+        Self { buf, y: y0, y1 }
     }
-    for (y, out_row) in (y0..y1).zip(out.chunks_exact_mut(row_len)) {
+
+    /// The next row.
+    #[inline(always)]
+    pub fn y(&self) -> usize {
+        self.y
+    }
+
+    /// Consumes the window sums of row `y()` (`out_row` is its output row) and slides the
+    /// column sums down to the next row.
+    #[inline(always)]
+    pub fn row<P: StripPass<K>>(&mut self, st: &Strips, out_row: &mut [f32], pass: &P) {
+        let (r, len, y) = (st.r, st.len, self.y);
+        let col: &mut [[V; K]] = vecs_mut(&mut self.buf).as_chunks_mut::<K>().0;
         fill_halo(col, r, len);
         // Running sum along the row: acc = sum of positions j - r ..= j + r.
         let mut acc = [[0.0f32; S]; K];
@@ -257,9 +272,27 @@ fn band<const K: usize, P: StripPass<K>>(
             pass.consume(y, j, &acc, out_row);
             sub(&mut acc, &col[j]);
         }
-        if y + 1 < y1 {
+        if y + 1 < self.y1 {
             slide(st, y, 0, &mut col[r..r + len], pass);
         }
+        self.y += 1;
+    }
+}
+
+/// The work of rows `y0..y0 + rows` (`out` holds them), from `init` as in [`Cursor::new`].
+#[inline(always)]
+fn band<const K: usize, P: StripPass<K>>(
+    st: &Strips,
+    y0: usize,
+    init: Option<&[f32]>,
+    out: &mut [f32],
+    row_len: usize,
+    pass: &P,
+) {
+    let rows = out.len() / row_len;
+    let mut cur = Cursor::<K>::new(st, y0, y0 + rows, init, pass);
+    for out_row in out.chunks_exact_mut(row_len) {
+        cur.row(st, out_row, pass);
     }
 }
 
@@ -321,7 +354,7 @@ isa_builds!(band_avx2, replay_avx2, "avx2,fma");
 isa_builds!(band_avx512, replay_avx512, "avx512f,avx2,fma");
 
 /// [`band`] in the build `isa` picks.
-fn band_isa<const K: usize, P: StripPass<K>>(
+pub(crate) fn band_isa<const K: usize, P: StripPass<K>>(
     st: &Strips,
     y0: usize,
     init: Option<&[f32]>,
@@ -367,7 +400,7 @@ fn replay_isa<const K: usize, P: StripPass<K>>(
 /// while they are as fast, else about four sub-bands per thread, at least [`MIN_SUB_ROWS`]
 /// rows each. Whole bands take `ceil(bands / threads)` rounds of `1 / bands` of the work;
 /// sub-bands about `1.4 / threads` (the replay adds its vertical updates, ~40%).
-fn sub_band_rows(h: usize, rows: usize, threads: usize) -> usize {
+pub(crate) fn sub_band_rows(h: usize, rows: usize, threads: usize) -> usize {
     let bands = h.div_ceil(rows.max(1));
     if 5 * threads * bands.div_ceil(threads.max(1)) <= 7 * bands {
         return rows;

@@ -265,9 +265,9 @@ fn atrous_is_identical_for_any_thread_count() {
 }
 
 /// The guided filter's bands and lane strips follow the image size and radius only: the
-/// result is bit-identical on 1, 2, 3 and 7 threads (several bands: 300 rows at r = 5), and
-/// the baseline build computes the same bits as the AVX2 / AVX-512 ones (no fused
-/// multiply-adds in the guided filter).
+/// result is bit-identical on 1, 2, 3 and 7 threads (several bands: 300 rows at r = 5), with
+/// the box passes fused or not, and the baseline build computes the same bits as the AVX2 /
+/// AVX-512 ones (no fused multiply-adds in the guided filter).
 #[test]
 fn guided_is_identical_for_any_thread_count_and_build() {
     let mut rng = Rng::new(13);
@@ -293,6 +293,18 @@ fn guided_is_identical_for_any_thread_count_and_build() {
             );
         }
         assert!(one.data() == run(2, crate::simd::Isa::Base).data(), "{p:?}: baseline build differs");
+        // The fused box passes (crate::fused) in 1-4 walks, and the two passes over the
+        // whole coefficient plane, whatever the thread count picks.
+        use crate::guided::{guided_with_plan, Plan};
+        for plan in
+            [Plan::TwoPasses, Plan::Fused { runs: 1 }, Plan::Fused { runs: 2 }, Plan::Fused { runs: 4 }]
+        {
+            for (threads, isa) in [(1, crate::simd::isa()), (3, crate::simd::Isa::Base)] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let got = pool.install(|| guided_with_plan(&color, &g, &p, isa, plan).unwrap());
+                assert!(one.data() == got.data(), "{p:?}: {plan:?} on {threads} threads {isa:?} differs");
+            }
+        }
     }
 }
 

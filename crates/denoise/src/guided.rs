@@ -164,8 +164,10 @@ pub(crate) fn guided_with_plan(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(not(test), allow(dead_code))] // the tests force each plan
 pub(crate) enum Plan {
-    /// Fused while the threads are fewer than the bands ([`fused_runs`]).
+    /// The default: [`Plan::TwoPasses`] (see `guided_impl`).
     Auto,
+    /// Fused while the threads are fewer than the bands ([`fused_runs`]).
+    FusedAuto,
     TwoPasses,
     Fused {
         runs: usize,
@@ -402,7 +404,10 @@ fn guided_impl<const D: usize, const K1: usize, const K2: usize>(
     // Pass 2: average the coefficients over the windows covering each pixel and apply them.
     let apply = Apply::<D> { inputs: &inputs, range: inputs.fit_range() };
     let runs = match plan {
-        Plan::Auto => fused_runs(&st, rayon::current_num_threads()),
+        // Not yet the default: 7 % more CPU time than the two passes on 1 thread (dev build,
+        // 2-core machine, docs/performance.md "Stop 16"); to be timed on the idle machine.
+        Plan::Auto => None,
+        Plan::FusedAuto => fused_runs(&st, rayon::current_num_threads()),
         Plan::TwoPasses => None,
         Plan::Fused { runs } => Some(runs),
     };

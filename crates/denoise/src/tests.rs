@@ -296,9 +296,13 @@ fn guided_is_identical_for_any_thread_count_and_build() {
         // The fused box passes (crate::fused) in 1-4 walks, and the two passes over the
         // whole coefficient plane, whatever the thread count picks.
         use crate::guided::{guided_with_plan, Plan};
-        for plan in
-            [Plan::TwoPasses, Plan::Fused { runs: 1 }, Plan::Fused { runs: 2 }, Plan::Fused { runs: 4 }]
-        {
+        for plan in [
+            Plan::TwoPasses,
+            Plan::FusedAuto,
+            Plan::Fused { runs: 1 },
+            Plan::Fused { runs: 2 },
+            Plan::Fused { runs: 4 },
+        ] {
             for (threads, isa) in [(1, crate::simd::isa()), (3, crate::simd::Isa::Base)] {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
                 let got = pool.install(|| guided_with_plan(&color, &g, &p, isa, plan).unwrap());

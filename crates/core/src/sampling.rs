@@ -259,6 +259,13 @@ impl Distribution1D {
         self.func.len()
     }
 
+    /// The CDF: `cdf()[i]` = probability of the cells `< i`, `cdf()[count()] = 1` (for
+    /// vectorised copies of the sampling routines).
+    #[inline]
+    pub fn cdf(&self) -> &[f32] {
+        &self.cdf
+    }
+
     /// Sum of the (sanitised) weights; 0 for a degenerate distribution.
     #[inline]
     pub fn total(&self) -> f32 {

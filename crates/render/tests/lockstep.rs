@@ -206,6 +206,39 @@ fn lockstep_films_equal_scalar_films_with_few_lights() {
     assert_identical("lockstep_few_lights.toml", &scene, 45, 30, 6);
 }
 
+/// The lights of the open scenes (bunny, teapot, engine: the default sky and sun) in
+/// variants that reach every branch of the environment's lane code: a sky with black
+/// ground (zero-weight bands), a constant environment, a sky with a constant one, the sun
+/// alone, and the sky with several suns (more than one directional light in the table).
+#[test]
+fn lockstep_films_equal_scalar_films_with_sky_and_sun_variants() {
+    use filtrace_scene::{Environment, Light};
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_few_lights.toml");
+    let base = filtrace_scene::toml_scene::load_toml(&path).unwrap();
+    let sky = |ground: f32| {
+        Light::Environment(Environment::Sky {
+            zenith: Vec3::new(1.0, 1.1, 1.3),
+            horizon: Vec3::splat(0.8),
+            ground: Vec3::splat(ground),
+        })
+    };
+    let constant = Light::Environment(Environment::Constant { radiance: Vec3::new(0.2, 0.3, 0.4) });
+    let sun = |d: Vec3, e: f32| Light::Directional { direction: d, irradiance: Vec3::splat(e) };
+    let sun1 = sun(Vec3::new(0.5, 1.0, 0.8), 2.0);
+    let variants: [(&str, Vec<Light>); 5] = [
+        ("sky with black ground + sun", vec![sky(0.0), sun1.clone()]),
+        ("constant environment", vec![constant.clone()]),
+        ("sky + constant + sun", vec![sky(0.3), constant, sun1.clone()]),
+        ("sun alone", vec![sun1.clone()]),
+        ("sky + three suns", vec![sky(0.3), sun1, sun(Vec3::new(-1.0, 0.5, 0.2), 0.7), sun(Vec3::Y, 0.3)]),
+    ];
+    for (name, lights) in variants {
+        let mut scene = base.clone();
+        scene.lights = lights;
+        assert_identical(name, &scene, 37, 22, 4);
+    }
+}
+
 /// The lane utilisation counters add up: every group counts its lanes, lanes alive only
 /// decrease with the vertex.
 #[test]

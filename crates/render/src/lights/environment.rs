@@ -14,8 +14,13 @@
 //!
 //! Power for light selection: `π R² lum(E)` with `E = π · mean radiance` (irradiance a
 //! plane would receive from a uniform hemisphere) and `R` the scene bounding radius.
+//!
+//! The lockstep tracer's eight-lane versions ([`EnvironmentLight::radiance8`],
+//! [`EnvironmentLight::pdf8`], [`EnvironmentLight::sample8`]) perform the same operations
+//! in the same order, so each lane has the scalar bits.
 
-use filtrace_core::sampling::{Distribution1D, INV_4PI};
+use crate::integrator::lanes::{gather, mask_words, select, trunc_below, F8, LANES, M8, U8, V8};
+use filtrace_core::sampling::{Distribution1D, INV_4PI, ONE_MINUS_EPSILON};
 use filtrace_core::{luminance, Rgb, Vec2, Vec3};
 use filtrace_scene::Environment;
 use std::f32::consts::PI;
@@ -76,6 +81,11 @@ impl EnvironmentLight {
         light
     }
 
+    /// The distribution of `y` that [`Self::sample`] draws from.
+    pub fn distribution(&self) -> &Distribution1D {
+        &self.distribution
+    }
+
     /// Radiance as a function of the up component `y`.
     #[inline]
     fn radiance_y(&self, y: f32) -> Rgb {
@@ -117,5 +127,94 @@ impl EnvironmentLight {
         }
         let x = (0.5 * (dir.y + 1.0)).clamp(0.0, filtrace_core::sampling::ONE_MINUS_EPSILON);
         self.distribution.pdf_continuous(x) * INV_4PI
+    }
+}
+
+/// Eight samples of [`EnvironmentLight::sample8`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct EnvSample8<const A: bool> {
+    /// The lanes with a sample (where the scalar code returns `Some`).
+    pub(crate) ok: M8<A>,
+    /// The lanes left to the scalar [`EnvironmentLight::sample`]: a CDF cell of zero
+    /// width (`find_interval` steps off it; reached only at its boundary).
+    pub(crate) scalar: M8<A>,
+    pub(crate) wi: V8<A>,
+    /// The radiance from `wi`.
+    pub(crate) li: V8<A>,
+    /// Solid-angle density, without light selection.
+    pub(crate) pdf: F8<A>,
+}
+
+impl EnvironmentLight {
+    /// [`Self::radiance`] in lanes, from the directions' up components `y`.
+    #[inline(always)]
+    pub(crate) fn radiance8<const A: bool>(&self, y: F8<A>) -> V8<A> {
+        let blend = V8::splat(self.horizon) + V8::splat(self.zenith - self.horizon) * y.min(F8::splat(1.0));
+        let sky = V8::select(y.ge(F8::splat(0.0)), blend, V8::splat(self.ground));
+        V8::splat(self.constant) + sky
+    }
+
+    /// [`Self::pdf`] in lanes, from the directions' up components `y`.
+    #[inline(always)]
+    pub(crate) fn pdf8<const A: bool>(&self, y: F8<A>) -> F8<A> {
+        let d = &self.distribution;
+        let n = d.count();
+        if d.is_degenerate() || n == 0 {
+            return F8::splat(0.0);
+        }
+        let (zero, nf) = (F8::splat(0.0), F8::splat(n as f32));
+        // `Distribution1D::pdf_continuous`.
+        let x = (F8::splat(0.5) * (y + F8::splat(1.0))).clamp(zero, F8::splat(ONE_MINUS_EPSILON));
+        let inside = x.ge(zero) & x.lt(F8::splat(1.0));
+        let i = trunc_below(x * nf, n as u32);
+        let cdf = d.cdf();
+        let pmf = gather(cdf, i.wrapping_add(U8::splat(1))) - gather(cdf, i);
+        select(inside, pmf * nf, zero) * F8::splat(INV_4PI)
+    }
+
+    /// [`Self::sample`] in the lanes `lanes` with `(ux, uy)`. The band is found by
+    /// counting the CDF entries at or below `ux` (`find_interval`'s binary search, without
+    /// its branches) and read by two gathers; the sine and cosine of `φ` are libm's, per
+    /// lane, as in the scalar code.
+    #[inline(always)]
+    pub(crate) fn sample8<const A: bool>(&self, lanes: M8<A>, ux: F8<A>, uy: F8<A>) -> EnvSample8<A> {
+        let d = &self.distribution;
+        let n = d.count();
+        if d.is_degenerate() || n == 0 {
+            return EnvSample8::default();
+        }
+        let (zero, one, nf) = (F8::<A>::splat(0.0), F8::<A>::splat(1.0), F8::<A>::splat(n as f32));
+        // `Distribution1D::sample_continuous`: the cell, its CDF interval, `u` within it.
+        let cdf = d.cdf();
+        let mut below = U8::<A>::splat(0);
+        for &c in &cdf[1..] {
+            below = below.wrapping_sub(mask_words(F8::splat(c).le(ux)));
+        }
+        let i = below.min(U8::splat(n as u32 - 1));
+        let lo = gather(cdf, i);
+        let pmf = gather(cdf, i.wrapping_add(U8::splat(1))) - lo;
+        let live = pmf.gt(zero);
+        let du = select(live, ((ux - lo) / pmf).clamp(zero, F8::splat(ONE_MINUS_EPSILON)), zero);
+        let x = ((i.to_f32() + du) / nf).min(F8::splat(ONE_MINUS_EPSILON));
+        let px = pmf * nf;
+        // The direction: `y` from the band, `φ` uniform.
+        let y = (F8::splat(2.0) * x - one).clamp(-one, one);
+        let r = (one - y * y).max(zero).sqrt();
+        let ok = lanes & live & px.gt(zero);
+        let phi = (F8::<A>::splat(2.0 * PI) * uy).to_array();
+        let (mut sin, mut cos) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for k in 0..LANES {
+            if ok.get(k) {
+                (sin[k], cos[k]) = phi[k].sin_cos();
+            }
+        }
+        let (sin, cos) = (F8::from_array(sin), F8::from_array(cos));
+        EnvSample8 {
+            ok,
+            scalar: lanes & !live,
+            wi: V8::new(r * cos, y, r * sin),
+            li: self.radiance8(y),
+            pdf: px * F8::splat(INV_4PI),
+        }
     }
 }

@@ -230,6 +230,8 @@ impl Light {
 }
 
 #[cfg(test)]
+mod environment_tests;
+#[cfg(test)]
 mod tests;
 #[cfg(test)]
 mod update_tests;

@@ -345,6 +345,16 @@ impl LightSet {
         }
     }
 
+    /// Selection probability of the environment (0 without one).
+    #[inline]
+    pub fn environment_pmf(&self) -> f32 {
+        if self.has_environment() {
+            self.sampler.pmf_of(self.env_index as usize)
+        } else {
+            0.0
+        }
+    }
+
     /// Solid-angle density (incl. selection) of sampling the environment direction `dir`.
     #[inline]
     pub fn pdf_environment(&self, dir: Vec3) -> f32 {

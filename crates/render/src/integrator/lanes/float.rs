@@ -83,6 +83,13 @@ impl<const A: bool> F8<A> {
             zip(self, o, f32::max)
         )
     }
+    /// `f32::clamp` (`if x < lo { lo }`, then `if x > hi { hi }`: NaN stays NaN, and
+    /// `-0.0` stays `-0.0` against a bound `0.0`, which `max`/`min` would not keep).
+    #[inline(always)]
+    pub fn clamp(self, lo: F8<A>, hi: F8<A>) -> F8<A> {
+        let x = select(self.lt(lo), lo, self);
+        select(x.gt(hi), hi, x)
+    }
     /// `f32::abs` (clears the sign bit).
     #[inline(always)]
     pub fn abs(self) -> F8<A> {

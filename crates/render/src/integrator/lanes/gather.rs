@@ -166,6 +166,20 @@ pub fn lookup8_u32<const A: bool>(table: &[u32; LANES], idx: U8<A>) -> U8<A> {
     )
 }
 
+/// `table[min(idx[i], table.len() - 1)]` per lane: one `vgatherdps` with AVX2 (for
+/// tables of more than eight entries; [`lookup8`] for eight). `table` must not be empty.
+#[inline(always)]
+pub fn gather<const A: bool>(table: &[f32], idx: U8<A>) -> F8<A> {
+    assert!(!table.is_empty() && table.len() <= i32::MAX as usize, "gather: table of {} words", table.len());
+    let last = U8::<A>::splat((table.len() - 1) as u32);
+    let idx = idx.min(last);
+    // SAFETY (AVX2 branch): every index is at most `table.len() - 1` (clamped above).
+    avx_or!(A, F8(_mm256_i32gather_ps::<4>(table.as_ptr(), _mm256_castps_si256(idx.0))), {
+        let i = idx.to_array();
+        F8::from_array(per_lane(|k| table[i[k] as usize]))
+    })
+}
+
 /// Lanes of `m` whose word is not zero (words `u32::MAX` / 0, as [`lookup8_u32`] of a
 /// mask table returns them).
 #[inline(always)]
@@ -183,9 +197,10 @@ pub fn mask_of<const A: bool>(m: U8<A>) -> M8<A> {
     )
 }
 
-/// `(x as usize).min(n - 1)` per lane (`n` at most 8; truncation, NaN and negatives to 0).
+/// `(x as usize).min(n - 1)` per lane for `x < 2^31` and `1 <= n < 2^31` (truncation, NaN
+/// and negatives to 0).
 #[inline(always)]
-fn trunc_below8<const A: bool>(x: F8<A>, n: u32) -> U8<A> {
+pub fn trunc_below<const A: bool>(x: F8<A>, n: u32) -> U8<A> {
     avx_or!(
         A,
         {
@@ -217,7 +232,7 @@ pub fn alias_pick8<const A: bool>(
 ) -> (U8<A>, F8<A>) {
     debug_assert!((1..=8).contains(&n));
     let x = u * F8::splat(n as f32);
-    let i = trunc_below8(x, n);
+    let i = trunc_below(x, n);
     let i_f = i.to_f32();
     let f = x - i_f;
     let keep = f.lt(lookup8(q, i));

@@ -42,6 +42,24 @@ impl<const A: bool> U8<A> {
             self.zip(o, u32::wrapping_add)
         )
     }
+    /// `wrapping_sub`.
+    #[inline(always)]
+    pub fn wrapping_sub(self, o: U8<A>) -> U8<A> {
+        avx_or!(
+            A,
+            U8(_mm256_castsi256_ps(_mm256_sub_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))),
+            self.zip(o, u32::wrapping_sub)
+        )
+    }
+    /// `u32::min`.
+    #[inline(always)]
+    pub fn min(self, o: U8<A>) -> U8<A> {
+        avx_or!(
+            A,
+            U8(_mm256_castsi256_ps(_mm256_min_epu32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))),
+            self.zip(o, u32::min)
+        )
+    }
     /// `wrapping_mul`.
     #[inline(always)]
     pub fn wrapping_mul(self, o: U8<A>) -> U8<A> {

@@ -8,8 +8,9 @@
 //! Per bounce, for the lanes still alive (`act`): emission found by the previous BSDF
 //! sample (MIS against light sampling), the sampler (eight keys per integer instruction,
 //! [`Sampler8`]), shading frames, next-event estimation (light selection in lanes for
-//! scenes with at most eight lights, else per lane; area lights sampled in lanes, one packet
-//! of shadow rays, BSDF value and density in lanes for diffuse surfaces), BSDF sampling
+//! scenes with at most eight lights, else per lane; area and directional lights and the
+//! environment sampled in lanes, one packet of shadow rays, BSDF value and density in
+//! lanes for diffuse surfaces), BSDF sampling
 //! (cosine hemisphere in lanes for diffuse surfaces), Russian roulette, and one packet of
 //! closest-hit queries followed by the hit records (`from_hit` in lanes: the triangle
 //! records are loaded as rows and transposed, vertex normals gathered per lane and
@@ -19,9 +20,10 @@
 //!
 //! **Exactness is the contract.** Every lane performs the operations of
 //! [`super::path::li`] / [`super::path::trace_from_hit`] in the same order (see
-//! [`super::lanes`]), and what is not worth a lane version (glossy BSDFs, point, spot,
-//! directional and environment lights, emission, misses, uv interpolation) calls
-//! the scalar code for that lane. The film is therefore bit-identical to the scalar
+//! [`super::lanes`]), and what is not worth a lane version (glossy BSDFs, point and spot
+//! lights, any light of a scene with more than eight, emission, uv interpolation) calls
+//! the scalar code for that lane; paths that leave the scene add the environment in
+//! lanes. The film is therefore bit-identical to the scalar
 //! renderer's (colour, variance and every AOV), which `tests/lockstep.rs` checks on every
 //! built-in scene and on a TOML scene with every material, light type and a texture.
 //! Since all lanes start together and every stage is per vertex, the vertex index is the
@@ -42,15 +44,15 @@
 // included), not in the form clippy prefers.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::nonminimal_bool)]
 
-use super::lanes::{bits, from_bits, load8, load8_u32, per_lane, F8, LANES, M8, U8, V8};
+use super::lanes::{bits, from_bits, load8, load8_u32, per_lane, select, F8, LANES, M8, U8, V8};
 use super::path::visible_surface;
 use super::pool::{PathLanes, Pool, POOL};
 use super::sampler8::Sampler8;
+use super::sampling8::power_heuristic8;
 use super::{CameraSample, PathContext, PathParams, Split, SLOT_PIXEL};
 use crate::camera::PinholeCamera;
 use crate::film::VisibleSurface;
 use filtrace_accel::{HitPacket, RayPacket};
-use filtrace_core::sampling::power_heuristic;
 use filtrace_core::Rgb;
 use shade::shade;
 use surf8::{from_hits, lanes_of, Surf8};
@@ -211,7 +213,7 @@ pub fn trace_pool_at<const AVX2: bool>(
     out: &mut [CameraSample; POOL],
 ) {
     debug_assert!(n <= POOL);
-    *out = [CameraSample::default(); POOL];
+    // (`camera_group` writes every field of `out[..n]`: no 8.7 kB `memset` per pool.)
     pool.clear();
     // The hit records of the batch at hand (`from_hits` writes every field; one record
     // per pool, not a 672-byte `memset` per batch).
@@ -283,15 +285,24 @@ fn camera_group<const AVX2: bool>(
         PoolCameras::Row { .. } => (index == 0, index == 0, true),
         PoolCameras::Given { paths, .. } => (true, false, paths),
     };
-    if on_hit {
-        for i in lanes_of(lanes & hit) {
-            out[first + i].surface = Some(visible_surface(ctx, &si.lane(i)));
-        }
+    // Every field of the lanes' samples: the paths write their radiance when they end.
+    for i in lanes_of(lanes & hit) {
+        let surface = if on_hit { Some(visible_surface(ctx, &si.lane(i))) } else { None };
+        out[first + i] = CameraSample { radiance: Split::default(), surface };
     }
-    for i in lanes_of(lanes & !hit) {
-        let o = &mut out[first + i];
-        o.radiance.direct = ctx.lights.environment_radiance(dir.lane(i));
-        o.surface = on_miss.then(VisibleSurface::default);
+    let missed = lanes & !hit;
+    if missed.any() {
+        // `environment_radiance` (zero without an environment), in lanes (no closure:
+        // it would not inherit AVX2).
+        let le = match ctx.lights.environment() {
+            Some(e) => e.radiance8(dir.y),
+            None => V8::default(),
+        };
+        let surface = if on_miss { Some(VisibleSurface::default()) } else { None };
+        for i in lanes_of(missed) {
+            out[first + i] =
+                CameraSample { radiance: Split { direct: le.lane(i), indirect: Rgb::ZERO }, surface };
+        }
     }
     if !paths {
         return;
@@ -363,7 +374,8 @@ fn bounce_batch<const AVX2: bool>(
 }
 
 /// The environment's radiance, MIS-weighted, for the `lanes` whose ray `dir` left the
-/// scene (per lane: few lanes miss), added to the radiance of path vertex `vertex`.
+/// scene, added to the radiance of path vertex `vertex` (in lanes: on open scenes most
+/// paths end here).
 #[inline(always)]
 fn add_environment<const A: bool>(
     ctx: &PathContext,
@@ -372,24 +384,21 @@ fn add_environment<const A: bool>(
     p: &mut PathLanes<A>,
     vertex: u32,
 ) {
-    if !ctx.lights.has_environment() {
+    let Some(env) = ctx.lights.environment() else { return };
+    if !lanes.any() {
         return;
     }
-    for i in lanes_of(lanes) {
-        let w = dir.lane(i);
-        let le = ctx.lights.environment_radiance(w);
-        if le != Rgb::ZERO {
-            let w_b = if p.specular.get(i) {
-                1.0
-            } else {
-                power_heuristic(1.0, p.p_b.lane(i), 1.0, ctx.lights.pdf_environment(w))
-            };
-            let l = p.beta.lane(i) * w_b * le;
-            if vertex <= 1 {
-                p.l_direct.set_lane(i, p.l_direct.lane(i) + l);
-            } else {
-                p.l_indirect.set_lane(i, p.l_indirect.lane(i) + l);
-            }
-        }
+    let le = env.radiance8(dir.y);
+    let adds = lanes & !le.is_zero();
+    if !adds.any() {
+        return;
+    }
+    let p_l = F8::splat(ctx.lights.environment_pmf()) * env.pdf8(dir.y);
+    let w_b = select(p.specular, F8::splat(1.0), power_heuristic8(p.p_b, p_l));
+    let l = p.beta * w_b * le;
+    if vertex <= 1 {
+        p.l_direct = V8::select(adds, p.l_direct + l, p.l_direct);
+    } else {
+        p.l_indirect = V8::select(adds, p.l_indirect + l, p.l_indirect);
     }
 }

@@ -2,8 +2,10 @@
 //! [`trace_from_hit`](crate::integrator::path::trace_from_hit)'s loop after the hit, as
 //! named steps in its order: [`add_emission`], [`bsdfs`], [`VertexSamples8::draw`],
 //! [`sample_lights`], [`add_light_sample`], [`sample_bsdf`], [`russian_roulette`]. The
-//! lanes of a Lambert surface and of an area light run the lane versions beside the
-//! scalar code ([`Diffuse8`], [`AreaLight8`]); every other lane calls the scalar code.
+//! lanes of a Lambert surface and of an area light, a directional light or the environment
+//! run the lane versions beside the scalar code ([`Diffuse8`], [`AreaLight8`],
+//! [`EnvironmentLight::sample8`](crate::lights::EnvironmentLight::sample8)); every other
+//! lane calls the scalar code.
 
 use super::surf8::{lanes_of, Surf8};
 use super::tables::{
@@ -20,6 +22,7 @@ use crate::integrator::sampler8::Sampler8;
 use crate::integrator::sampling8::{frame_from_z, power_heuristic8, to_local, to_world};
 use crate::integrator::{vertex_slot, SLOT_BSDF, SLOT_CHOICES, SLOT_LIGHT, SLOT_RR};
 use crate::lights::area::AreaLight8;
+use crate::lights::environment::EnvSample8;
 use crate::surface::SHADOW_END_FRACTION;
 use filtrace_accel::RayPacket;
 use filtrace_core::sampling::power_heuristic;
@@ -268,9 +271,10 @@ fn sample_lights<const A: bool>(
     ls
 }
 
-/// With at most eight lights the choice and the area lights' data are lanes
-/// ([`SmallLights`]: the alias pick and one `vpermps` per field); only the lanes that chose
-/// another kind of light take the per-lane code.
+/// With at most eight lights the choice and the lights' data are lanes ([`SmallLights`]:
+/// the alias pick and one `vpermps` per field): area lights are left to the caller,
+/// directional lights and the environment are sampled here; only the lanes that chose
+/// another kind of light (point, spot) take the per-lane code.
 #[inline(always)]
 fn choose_small<const A: bool>(
     lc: &LockstepContext,
@@ -282,7 +286,36 @@ fn choose_small<const A: bool>(
     let (k, pmf) = alias_pick8(u.u_select, sl.n, &sl.q, &sl.alias, &sl.pmf);
     let chosen = act & pmf.gt(F8::splat(0.0));
     let is_area = mask_of(lookup8_u32(&sl.is_area, k));
-    let (ls, _) = choose_per_lane(lc, si, chosen & !is_area, u);
+    let directional = chosen & mask_of(lookup8_u32(&sl.is_directional, k));
+    let environment = chosen & mask_of(lookup8_u32(&sl.is_environment, k));
+    let env = match lc.ctx.lights.environment() {
+        Some(e) if environment.any() => e.sample8(environment, u.u_light.0, u.u_light.1),
+        _ => EnvSample8 { scalar: environment, ..Default::default() },
+    };
+    let scalar = (chosen & !(is_area | directional | environment)) | env.scalar;
+    let (mut ls, _) = choose_per_lane(lc, si, scalar, u);
+    if directional.any() {
+        // `Light::sample_li` of a directional light: a delta sample of density 1.
+        macro_rules! row {
+            ($t:expr) => {
+                V8::new(lookup8(&$t[0], k), lookup8(&$t[1], k), lookup8(&$t[2], k))
+            };
+        }
+        ls.ok = ls.ok | directional;
+        ls.delta = ls.delta | directional;
+        ls.wi = V8::select(directional, row!(sl.to_light), ls.wi);
+        ls.li = V8::select(directional, row!(sl.irradiance), ls.li);
+        ls.pdf = select(directional, pmf * F8::splat(1.0), ls.pdf);
+        ls.dist = select(directional, F8::splat(f32::INFINITY), ls.dist);
+    }
+    let in_env = environment & !env.scalar;
+    if in_env.any() {
+        ls.ok = M8::select(in_env, env.ok, ls.ok);
+        ls.wi = V8::select(in_env, env.wi, ls.wi);
+        ls.li = V8::select(in_env, env.li, ls.li);
+        ls.pdf = select(in_env, pmf * env.pdf, ls.pdf);
+        ls.dist = select(in_env, F8::splat(f32::INFINITY), ls.dist);
+    }
     let lanes = chosen & is_area;
     if !lanes.any() {
         return (ls, AreaChoice { lanes, pmf, lights: AreaLight8::default() });

@@ -9,7 +9,7 @@
 //! on the lights' world-space triangles and the selection: after
 //! [`LightSet::update_instances`] call [`LockstepTables::update_lights`].
 
-use crate::lights::LightSet;
+use crate::lights::{EmitterKind, LightSet};
 use crate::surface::{SceneGeometry, TRI_FLOATS};
 use filtrace_core::Rgb;
 use filtrace_scene::{MaterialId, Scene};
@@ -48,9 +48,16 @@ pub(crate) struct SmallLights {
     pub(crate) q: [f32; 8],
     pub(crate) alias: [u32; 8],
     pub(crate) pmf: [f32; 8],
-    /// Per light: `u32::MAX` for an area light, else 0; the same for two-sided ones.
+    /// Per light: `u32::MAX` for an area light, else 0; the same for two-sided ones, for
+    /// directional lights and for the environment.
     pub(crate) is_area: [u32; 8],
     pub(crate) two_sided: [u32; 8],
+    pub(crate) is_directional: [u32; 8],
+    pub(crate) is_environment: [u32; 8],
+    /// Per directional light its unit direction towards the light and its irradiance
+    /// (xyz / rgb rows; zero for the other lights).
+    pub(crate) to_light: [[f32; 8]; 3],
+    pub(crate) irradiance: [[f32; 8]; 3],
     /// Per field of the area words (`AREA_FLOATS` of them): its value per light.
     pub(crate) field: [[f32; 8]; AREA_FLOATS],
 }
@@ -184,6 +191,15 @@ fn small_lights(lights: &LightSet, area_words: &[f32]) -> Option<SmallLights> {
         if let Some(a) = lights.area_light(i) {
             t.is_area[i] = u32::MAX;
             t.two_sided[i] = if a.two_sided { u32::MAX } else { 0 };
+        }
+        if let Some(d) = lights.directional_light(i) {
+            t.is_directional[i] = u32::MAX;
+            for c in 0..3 {
+                (t.to_light[c][i], t.irradiance[c][i]) = (d.to_light[c], d.irradiance[c]);
+            }
+        }
+        if lights.emitter_kind(i) == Some(EmitterKind::Environment) {
+            t.is_environment[i] = u32::MAX;
         }
         for (f, w) in t.field.iter_mut().zip(&area_words[i * AREA_FLOATS..(i + 1) * AREA_FLOATS]) {
             f[i] = *w;

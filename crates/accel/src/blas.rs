@@ -99,7 +99,10 @@ impl Blas {
                 if tri_count < params.min_quantized_triangles {
                     return Blas::Bvh8(bvh);
                 }
-                QBvh8::compress(bvh).map_or_else(Blas::Bvh8, Blas::QBvh8)
+                match qwide::compress_nodes(&bvh.nodes) {
+                    Some(nodes) => Blas::QBvh8(QBvh8 { nodes, tris: bvh.tris, odds: bvh.odds }),
+                    None => Blas::Bvh8(bvh),
+                }
             }
         }
     }

@@ -15,13 +15,12 @@
 //! too. The quantisation still checks every decoded bound with the same `fma` the
 //! traversal evaluates (`qwide_avx2::qbox8`).
 //!
-//! The tree is the collapsed SAH tree of [`crate::blas::WideBvh<8>`] node for node, with
+//! The tree is the collapsed SAH tree of `blas::WideBvh<8>` node for node, with
 //! its slot order (any-hit odds, [`crate::child_order`]) and its triangle packets, so the
 //! leaf tests and their results are those of the uncompressed tree; only boxes are looser,
 //! which can cost extra node visits and leaf tests, never a hit. Chosen per bottom level by
 //! [`crate::BuildParams::min_quantized_triangles`].
 
-use crate::blas::WideBvh;
 use crate::child_order::Odds;
 use crate::sah::MAX_DEPTH;
 use crate::tri4::TriPackets;
@@ -148,16 +147,13 @@ pub(crate) struct QBvh8 {
     pub odds: Odds,
 }
 
-impl QBvh8 {
-    /// Compresses every node of `bvh`; gives `bvh` back when a node cannot be compressed
-    /// ([`QNode8::compress`]).
-    pub(crate) fn compress(bvh: WideBvh<8>) -> Result<Self, WideBvh<8>> {
-        match bvh.nodes.iter().map(QNode8::compress).collect::<Option<Vec<_>>>() {
-            Some(nodes) => Ok(Self { nodes, tris: bvh.tris, odds: bvh.odds }),
-            None => Err(bvh),
-        }
-    }
+/// Every node of an 8-wide tree compressed; `None` when one cannot be
+/// ([`QNode8::compress`]).
+pub(crate) fn compress_nodes(nodes: &[Node8]) -> Option<Vec<QNode8>> {
+    nodes.iter().map(QNode8::compress).collect()
+}
 
+impl QBvh8 {
     /// The nodes with their decoded boxes.
     pub(crate) fn decoded(&self) -> Vec<Node8> {
         self.nodes.iter().map(QNode8::decoded).collect()

@@ -32,7 +32,7 @@ dependency of filtrace. Prints markdown tables; --json writes everything.
 
     python3 scripts/ray_budget.py --scene-root OUT/scenes --suite-raw OUT/raw [--perf]
         [--scenes a,b] [--rays N] [--rounds R] [--json FILE]
-    python3 scripts/ray_budget.py --callgrind target/debug/filtrace [--scenes a,b] [--cg-dir DIR]
+    python3 scripts/ray_budget.py --skip-timing --callgrind target/debug/filtrace [--scenes a,b] [--cg-dir DIR]
     python3 scripts/ray_budget.py --rays-json FILE --suite-raw OUT/raw [--profile DIR/profile.json]
 """
 import argparse
@@ -471,6 +471,14 @@ def fmt(x, spec=".2f"):
     return "-" if x is None else format(x, spec)
 
 
+def span(row, key):
+    """'low-high x' of a figure from perf's lower and upper bound of Mitsuba's Embree share."""
+    lo, hi = row.get(f"{key}_render_perf"), row.get(f"{key}_kernels_perf")
+    if lo is None or hi is None:
+        return "-"
+    return f"{lo:.2f}x" if abs(hi - lo) < 0.005 else f"{lo:.2f}-{hi:.2f}x"
+
+
 def print_tables(tracer, rays, rows):
     print(f"Mitsuba's tracer: {tracer.get('bundled_embree')} (Embree {tracer.get('embree_version')}), "
           f"LLVM kernels call {', '.join(tracer.get('llvm_kernels_call', []))}; "
@@ -502,10 +510,10 @@ def print_tables(tracer, rays, rows):
               f"{fmt(r.get('target_ns'), '.0f')} | "
               f"{fmt(r.get('ray_speedup_needed'))}x ({fmt(r.get('ray_speedup_needed_no_other'))}x) | "
               f"{fmt(r.get('vs_mitsuba_rays_needed'))}x ({fmt(r.get('vs_mitsuba_rays_needed_no_other'))}x) | "
-              f"{fmt(r.get('mitsuba_embree_share_perf'), '.0%')} / {fmt(r.get('mitsuba_embree_share_of_kernels_perf'), '.0%')} "
-              f"| {fmt(r.get('vs_mitsuba_rays_needed_perf'))}x "
-              f"({fmt(r.get('vs_mitsuba_rays_needed_no_other_perf'))}x) |")
-    print("\n(CPU ns per sample; '-' in a speed-up column: the non-ray cost alone exceeds the target)")
+              f"{fmt(r.get('mitsuba_embree_share_of_render_perf'), '.0%')} / "
+              f"{fmt(r.get('mitsuba_embree_share_of_kernels_perf'), '.0%')} | {span(r, 'vs_mitsuba_rays_needed')} "
+              f"({span(r, 'vs_mitsuba_rays_needed_no_other')}) |")
+    print("\n(CPU ns per sample; '-': not measured, or in a speed-up column: the non-ray cost alone exceeds the target)")
 
 
 def main():
@@ -518,7 +526,7 @@ def main():
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--suite-raw", help="OUT/raw of scripts/bench_suite.sh (samples/s of both renderers)")
-    ap.add_argument("--profile", help="JSON {scene: {...}} replacing the built-in PROFILE (same keys)")
+    ap.add_argument("--profile", help="JSON {scene: {...}} replacing the built-in PROFILE's scenes (same keys)")
     ap.add_argument("--callgrind", metavar="FILTRACE", help="measure PROFILE with callgrind on this (dev) binary")
     ap.add_argument("--cg-res", type=int, default=128, help="callgrind renders: RES x RES pixels")
     ap.add_argument("--cg-spp", type=int, default=2)
@@ -540,7 +548,7 @@ def main():
     profile = PROFILE
     if args.profile:
         with open(args.profile) as f:
-            profile = json.load(f)
+            profile = {**PROFILE, **json.load(f)}
     if args.callgrind:
         os.makedirs(args.cg_dir, exist_ok=True)
         profile = dict(profile)
@@ -570,15 +578,17 @@ def main():
     rows = [budget(n, profile[n], rates.get(n), rays.get(n)) for n in args.scenes
             if n in profile and profile[n].get("closest_rays")]
     for r in rows:
-        share = (perf.get(r["scene"]) or {}).get("embree_share_of_render")
-        r["mitsuba_embree_share_of_kernels_perf"] = (perf.get(r["scene"]) or {}).get("embree_share_of_kernels")
-        if share is not None and r.get("mitsuba_ns"):
-            # Measured: Mitsuba's time in Embree, which replaces the estimate in the last column.
-            r["mitsuba_embree_share_perf"] = share
-            ray_ns = share * r["mitsuba_ns"]
+        got = perf.get(r["scene"]) or {}
+        if got.get("embree_share_of_render") is None or not r.get("mitsuba_ns"):
+            continue
+        # Measured: Mitsuba's time in Embree (lower and upper bound), which replaces the
+        # estimate of the coherence transfer.
+        for key in ("render", "kernels"):
+            ray_ns = got[f"embree_share_of_{key}"] * r["mitsuba_ns"]
             room = r["target_ns"] - r["filtrace_other_ns"]
-            r["vs_mitsuba_rays_needed_perf"] = ray_ns / room if room > 0 else None
-            r["vs_mitsuba_rays_needed_no_other_perf"] = ray_ns / r["target_ns"]
+            r[f"mitsuba_embree_share_of_{key}_perf"] = got[f"embree_share_of_{key}"]
+            r[f"vs_mitsuba_rays_needed_{key}_perf"] = ray_ns / room if room > 0 else None
+            r[f"vs_mitsuba_rays_needed_no_other_{key}_perf"] = ray_ns / r["target_ns"]
     print_tables(tracer, rays, rows)
     if args.json:
         with open(args.json, "w") as f:

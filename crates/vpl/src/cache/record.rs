@@ -110,28 +110,6 @@ fn sanitised(w: f32) -> f32 {
     }
 }
 
-/// Distance in `f64` ulps from a rounding midpoint between two `f32`s within which
-/// [`ratio_f32`] divides: the product is at most ~2 ulps from the quotient.
-const MIDPOINT_MARGIN: u64 = 16;
-
-/// `(acc / total) as f32` for `acc, total >= 0` from the product `acc · inv`
-/// (`inv = 1 / total`, one multiplication instead of a division per cell): the product
-/// is within two `f64` ulps of the quotient, so both round to the same `f32` unless the
-/// product lies within [`MIDPOINT_MARGIN`] ulps of a midpoint between two `f32`s (or
-/// below the normal `f32` range, where the rounding position moves); there, rarely, the
-/// division decides. Bit for bit the division (`ratio_equals_the_division`).
-#[inline]
-fn ratio_f32(acc: f64, total: f64, inv: f64) -> f32 {
-    let q = acc * inv;
-    // The 29 mantissa bits an `f32` drops; the midpoint is the top one alone.
-    let dropped = q.to_bits() & ((1 << 29) - 1);
-    if dropped.abs_diff(1 << 28) > MIDPOINT_MARGIN && q >= f32::MIN_POSITIVE as f64 {
-        q as f32
-    } else {
-        (acc / total) as f32
-    }
-}
-
 /// A discrete distribution over the VPLs: the CDF of `filtrace_core`'s `Distribution1D`,
 /// built with the same arithmetic (f64 sums, so the same `f32` values) and sampled with
 /// the same rule (the partition point of `cdf[1..] <= u`, zero cells skipped), so pmfs and
@@ -176,10 +154,10 @@ impl VplCdf {
         let n = weights.len();
         let mut cdf = vec![0.0f32; n + 1];
         if total64 > 0.0 && total64.is_finite() {
-            let (mut acc, inv) = (0.0f64, 1.0 / total64);
+            let mut acc = 0.0f64;
             for (c, &w) in cdf[1..].iter_mut().zip(weights) {
                 acc += sanitised(w) as f64;
-                *c = ratio_f32(acc, total64, inv);
+                *c = (acc / total64) as f32;
             }
         } else {
             for (i, c) in cdf.iter_mut().enumerate().skip(1) {
@@ -395,45 +373,9 @@ fn neighbourhood(tree: &KdTree, points: &[CachePoint], i: usize, m: usize, diago
 
 #[cfg(test)]
 mod tests {
-    use super::{ratio_f32, VplCdf};
+    use super::VplCdf;
     use filtrace_core::rng::SplitMix64;
     use filtrace_core::sampling::Distribution1D;
-
-    /// The CDF's quotient from the reciprocal is the division's, bit for bit: on random
-    /// sums and totals over many magnitudes, and on quotients placed a few ulps around
-    /// midpoints between two `f32`s and around `f32`s themselves (where the product and
-    /// the quotient can round differently: the test has power, the fallback is taken).
-    #[test]
-    fn ratio_equals_the_division() {
-        let mut rng = SplitMix64::new(21);
-        let check = |acc: f64, total: f64| {
-            let want = (acc / total) as f32;
-            assert_eq!(ratio_f32(acc, total, 1.0 / total).to_bits(), want.to_bits(), "{acc:e} / {total:e}");
-        };
-        for _ in 0..200_000 {
-            let total = (rng.next_f32() as f64 + 1e-3) * 10f64.powi((rng.next_f32() * 60.0) as i32 - 30);
-            check(total * rng.next_f32() as f64, total);
-            check(total, total);
-        }
-        let mut fallbacks = 0;
-        for _ in 0..20_000 {
-            let x = rng.next_f32().max(f32::MIN_POSITIVE);
-            let next = f32::from_bits(x.to_bits() + 1);
-            let total = 1.0 + rng.next_f32() as f64 * 1e4;
-            for target in [(x as f64 + next as f64) / 2.0, x as f64] {
-                let acc = target * total;
-                for k in -6i64..=6 {
-                    let acc = f64::from_bits((acc.to_bits() as i64 + k) as u64);
-                    check(acc, total);
-                    let dropped = (acc / total).to_bits() & ((1 << 29) - 1);
-                    fallbacks += (dropped.abs_diff(1 << 28) <= super::MIDPOINT_MARGIN) as usize;
-                }
-            }
-        }
-        assert!(fallbacks > 10_000, "{fallbacks} quotients near midpoints");
-        check(0.0, 1.0);
-        check(1e-300, 1.0);
-    }
 
     /// Same pmfs, totals and draws as `Distribution1D` (bit for bit), on weights with
     /// zero runs, bad values, all zeros, one cell and sizes around the block length,

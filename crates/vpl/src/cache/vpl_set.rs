@@ -129,12 +129,6 @@ impl RgbColumns {
 
     /// VPL `j`'s E² and E³.
     #[inline]
-    pub fn get(&self, j: usize) -> (Rgb, Rgb) {
-        let (c, b) = (&self.c, &self.b);
-        (Rgb::new(c[0][j], c[1][j], c[2][j]), Rgb::new(b[0][j], b[1][j], b[2][j]))
-    }
-
-    #[inline]
     pub fn set(&mut self, j: usize, c: Rgb, b: Rgb) {
         for k in 0..3 {
             (self.c[k][j], self.b[k][j]) = (c[k], b[k]);

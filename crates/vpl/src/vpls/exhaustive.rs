@@ -186,10 +186,15 @@ impl<'a> SceneVpls<'a> {
         }
         pass.packets.flush(pass.visible);
         // The totals in VPL order, as the reference sums them.
-        for (j, &vis) in visible.iter().enumerate() {
-            let (c, b) = rgb.get(j);
+        let ([cr, cg, cb], [br, bg, bb]) = (&rgb.c, &rgb.b);
+        let columns = cr.iter().zip(&cg[..n]).zip(&cb[..n]).zip(&br[..n]).zip(&bg[..n]).zip(&bb[..n]);
+        let luminances = out.full.iter_mut().zip(&out.unoccluded[..n]);
+        for (((((((&r, &g), &b), &b_r), &b_g), &b_b), &vis), (full, &unoccluded)) in
+            columns.zip(&visible[..n]).zip(luminances)
+        {
+            let (c, b) = (Rgb::new(r, g, b), Rgb::new(b_r, b_g, b_b));
             if vis {
-                out.full[j] = out.unoccluded[j];
+                *full = unoccluded;
             }
             out.totals[0] += if vis { c } else { Rgb::ZERO };
             out.totals[1] += c;

@@ -46,10 +46,11 @@ pub use alpha_max::{alpha_max_owner, alpha_max_weight};
 pub use feedback::SampleFeedback;
 pub use history::{SampleHistory, StoredSample};
 pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, StepOutcome};
-pub use placement::{place_cache_points, GBufferView};
+pub use placement::{is_surface, place_cache_points, place_on_surfaces, GBufferView, ScreenSurfaces};
 pub use record::{CacheRecord, ImportanceCache, VplCdf};
 pub use sampler::{sample_uniform_vpl, SamplePlan, VplDraw, MAX_DRAWS};
 pub use search::{cache_distance, KdTree, Nearest, Neighbours, MAX_NEIGHBOURS};
+pub(crate) use vpl_set::RgbColumns;
 pub use vpl_set::{
     evaluate_each_vpl, relaxed_geometry_term, relaxed_geometry_term_fast, relaxed_geometry_term_towards,
     RecordValues, Region, RelaxedReceiver, VplSet,

@@ -9,6 +9,8 @@
 //!   singularity (thesis 4.2.3, [`GeometryBound`]).
 //! - [`exhaustive`]: the ground truth the importance cache is measured against, every VPL
 //!   with exact visibility at every pixel, and the cache's [`crate::cache::VplSet`] view.
+//! - [`gbuffer`]: the surfaces through the pixel centres, traced only where the cache
+//!   placement and the records read them.
 //! - [`integrator`]: the many-light integrator of the per-frame renderer: VPLs, G-buffer
 //!   and importance cache in its `prepare`, shading with a sampler per camera sample, the
 //!   optimisation step after each pass; the d-distance layer of the thesis's Figure 27.
@@ -26,6 +28,7 @@
 
 pub mod eval;
 pub mod exhaustive;
+pub mod gbuffer;
 pub mod generate;
 pub mod integrator;
 pub mod rays;
@@ -38,6 +41,7 @@ mod tests;
 
 pub use eval::{GeometryBound, Receiver};
 pub use exhaustive::{exhaustive_pixel, render_exhaustive, ExhaustiveImage, SceneVpls};
+pub use gbuffer::{CameraSurfaces, RecordReceivers};
 pub use generate::{generate_vpls, VplParams};
 pub use integrator::{frame_vpl_seed, StageTimes, VplIntegrator, VplReport, VplSettings};
 pub use seam::{collect_frame, render_vpl_frame, render_vpl_passes, use_vpl_integrator, VplFrame};

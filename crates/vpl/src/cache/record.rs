@@ -178,6 +178,11 @@ impl VplCdf {
         self.cdf.len().saturating_sub(1)
     }
 
+    /// Bytes of its tables (the frame's memory estimate is checked against it).
+    pub fn heap_bytes(&self) -> usize {
+        (self.cdf.capacity() + self.coarse.capacity()) * size_of::<f32>()
+    }
+
     /// Sum of the sanitised weights; 0 for a degenerate distribution.
     #[inline]
     pub fn total(&self) -> f32 {

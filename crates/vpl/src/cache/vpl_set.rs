@@ -82,8 +82,9 @@ pub struct RecordValues {
     /// RGB sums over the VPLs of E¹, E², E³ (their colours colour the control variates).
     pub totals: [Rgb; 3],
     /// Scratch of packet implementations, kept to reuse its memory: per VPL the RGB
-    /// unoccluded and bounded contributions, and the visibility found by the packets.
-    pub(crate) rgb: Vec<(Rgb, Rgb)>,
+    /// unoccluded and bounded contributions (a column per channel), and the visibility
+    /// found by the packets.
+    pub(crate) rgb: RgbColumns,
     pub(crate) visible: Vec<bool>,
 }
 
@@ -106,6 +107,32 @@ impl RecordValues {
         self.totals[0] += full;
         self.totals[1] += unoccluded;
         self.totals[2] += bounded;
+    }
+}
+
+/// Per VPL the unoccluded contribution E² and the bounded one E³ in RGB, as columns
+/// (`c[k][j]`: channel `k` of VPL `j`), so that eight VPLs in a row are stored as blocks.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct RgbColumns {
+    pub c: [Vec<f32>; 3],
+    pub b: [Vec<f32>; 3],
+}
+
+impl RgbColumns {
+    /// Resets to `n` zero entries.
+    pub fn clear(&mut self, n: usize) {
+        for v in self.c.iter_mut().chain(&mut self.b) {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+    }
+
+    /// VPL `j`'s E² and E³.
+    #[inline]
+    pub fn set(&mut self, j: usize, c: Rgb, b: Rgb) {
+        for k in 0..3 {
+            (self.c[k][j], self.b[k][j]) = (c[k], b[k]);
+        }
     }
 }
 

@@ -6,9 +6,12 @@
 //! VPLs (depth 0) are `direct`, the rest `indirect`.
 
 use super::eval::{contribution, contribution_parts, PairParts, Receiver};
-use super::soa::{evaluate_groups, DiffuseSite, VplLanes};
+use super::gbuffer::RecordReceivers;
+use super::soa::{evaluate_groups, DiffuseSite, PairLanes, VplGroup, VplLanes};
 use super::{Vpl, VplKind, Vpls};
-use crate::cache::{relaxed_geometry_term_fast, CachePoint, RecordValues, Region, RelaxedReceiver, VplSet};
+use crate::cache::{
+    relaxed_geometry_term_fast, CachePoint, RecordValues, Region, RelaxedReceiver, RgbColumns, VplSet,
+};
 use filtrace_accel::{fan_class, SceneAccel, SegmentFan, FAN_CLASSES, LANES};
 use filtrace_core::cpu::{isa, Isa};
 use filtrace_core::sampler::Sampler;
@@ -103,12 +106,13 @@ pub struct ExhaustiveImage {
 }
 
 /// The VPLs of a frame as the importance cache sees them: each cache point's pixel has
-/// its receiver (the G-buffer's surface with its BSDF and outgoing direction).
+/// its receiver (the surface through the pixel's centre with its BSDF and outgoing
+/// direction).
 pub struct SceneVpls<'a> {
     pub ctx: PathContext<'a>,
     pub vpls: &'a Vpls,
-    /// Per pixel (row-major), the surface seen through its centre.
-    pub receivers: &'a [Option<Receiver>],
+    /// The surface seen through the centre of each record's pixel.
+    pub receivers: &'a RecordReceivers,
     /// The VPLs of the eight-lane path as a structure of arrays.
     lanes: VplLanes,
 }
@@ -131,12 +135,12 @@ fn f_folded(bsdf: &filtrace_render::bsdf::SurfaceBsdf, wo: Vec3, wi: Vec3) -> Rg
 
 impl<'a> SceneVpls<'a> {
     /// The cache's view of `vpls` (with their structure-of-arrays copy, made once here).
-    pub fn new(ctx: PathContext<'a>, vpls: &'a Vpls, receivers: &'a [Option<Receiver>]) -> Self {
+    pub fn new(ctx: PathContext<'a>, vpls: &'a Vpls, receivers: &'a RecordReceivers) -> Self {
         SceneVpls { ctx, vpls, receivers, lanes: VplLanes::new(&vpls.vpls) }
     }
 
     fn receiver(&self, site: &CachePoint) -> Option<&Receiver> {
-        self.receivers.get(site.pixel as usize)?.as_ref()
+        self.receivers.get(site.pixel)
     }
 
     /// [`VplSet::evaluate_record`] with the lane code of `isa` (at most the detected level;
@@ -153,8 +157,7 @@ impl<'a> SceneVpls<'a> {
         out.clear(n);
         let Some(rx) = self.receiver(site) else { return };
         let (mut rgb, mut visible) = (std::mem::take(&mut out.rgb), std::mem::take(&mut out.visible));
-        rgb.clear();
-        rgb.resize(n, (Rgb::ZERO, Rgb::ZERO));
+        rgb.clear(n);
         visible.clear();
         visible.resize(n, false);
         let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
@@ -168,17 +171,11 @@ impl<'a> SceneVpls<'a> {
         match DiffuseSite::new(rx, &relaxed, self.vpls.bound) {
             Some(diffuse) => {
                 evaluate_groups(&self.lanes, &diffuse, isa, |g, p| {
-                    for i in 0..g.live {
-                        let j = g.index[i] as usize;
-                        if p.valid >> i & 1 == 0 {
-                            self.evaluate_pair(j, rx, region, &relaxed, &mut pass);
-                            continue;
-                        }
-                        if p.ray >> i & 1 != 0 {
-                            let side = (p.back >> i & 1) as usize;
-                            pass.packets.push_lane(j, side, p.w(i), p.t_max[i], pass.visible);
-                        }
-                        pass.store(j, p.c(i), p.b(i), p.lum_c[i], p.lum_b[i]);
+                    if g.dense && p.valid == u8::MAX {
+                        pass.store_group(g.index[0] as usize, p);
+                        pass.push_rays(g, p);
+                    } else {
+                        self.store_lanes(g, p, rx, region, &relaxed, &mut pass);
                     }
                 });
                 for &j in &self.lanes.others {
@@ -189,15 +186,46 @@ impl<'a> SceneVpls<'a> {
         }
         pass.packets.flush(pass.visible);
         // The totals in VPL order, as the reference sums them.
-        for (j, (&(c, b), &vis)) in rgb.iter().zip(&visible).enumerate() {
+        let ([cr, cg, cb], [br, bg, bb]) = (&rgb.c, &rgb.b);
+        let columns = cr.iter().zip(&cg[..n]).zip(&cb[..n]).zip(&br[..n]).zip(&bg[..n]).zip(&bb[..n]);
+        let luminances = out.full.iter_mut().zip(&out.unoccluded[..n]);
+        for (((((((&r, &g), &b), &b_r), &b_g), &b_b), &vis), (full, &unoccluded)) in
+            columns.zip(&visible[..n]).zip(luminances)
+        {
+            let (c, b) = (Rgb::new(r, g, b), Rgb::new(b_r, b_g, b_b));
             if vis {
-                out.full[j] = out.unoccluded[j];
+                *full = unoccluded;
             }
             out.totals[0] += if vis { c } else { Rgb::ZERO };
             out.totals[1] += c;
             out.totals[2] += b;
         }
         (out.rgb, out.visible) = (rgb, visible);
+    }
+
+    /// A group's lanes one by one, in order: a lane the vector code left (degenerate
+    /// distance) the per-VPL way.
+    fn store_lanes(
+        &self,
+        g: &VplGroup,
+        p: &PairLanes,
+        rx: &Receiver,
+        region: &Region,
+        relaxed: &RelaxedReceiver,
+        pass: &mut RecordPass,
+    ) {
+        for i in 0..g.live {
+            let j = g.index[i] as usize;
+            if p.valid >> i & 1 == 0 {
+                self.evaluate_pair(j, rx, region, relaxed, pass);
+                continue;
+            }
+            if p.ray >> i & 1 != 0 {
+                let side = (p.back >> i & 1) as usize;
+                pass.packets.push_lane(j, side, p.class[i] as usize, p.w(i), p.t_max[i], pass.visible);
+            }
+            pass.store(j, p.c(i), p.b(i), p.lum_c[i], p.lum_b[i]);
+        }
     }
 
     /// One pair the per-VPL way: the contribution with its parts, its shadow ray queued,
@@ -308,14 +336,22 @@ impl<'a> ShadowPackets<'a> {
             visible[j] = !self.accel.occluded(ray);
             return;
         }
-        self.push_lane(j, side, ray.dir, ray.t_max, visible);
+        self.push_lane(j, side, fan_class(ray.dir), ray.dir, ray.t_max, visible);
     }
 
     /// Queues the shadow ray of VPL `j` from `origins[side]` along `dir` to `t_max` (the
-    /// ray [`Receiver::shadow_ray`] makes, given by its parts).
+    /// ray [`Receiver::shadow_ray`] makes, given by its parts; `class` is
+    /// [`fan_class`]`(dir)`).
     #[inline]
-    fn push_lane(&mut self, j: usize, side: usize, dir: Vec3, t_max: f32, visible: &mut [bool]) {
-        let class = fan_class(dir);
+    fn push_lane(
+        &mut self,
+        j: usize,
+        side: usize,
+        class: usize,
+        dir: Vec3,
+        t_max: f32,
+        visible: &mut [bool],
+    ) {
         let (fan, ids, len) = &mut self.fans[side][class];
         fan.set_lane(*len, dir, t_max);
         ids[*len] = j as u32;
@@ -389,7 +425,7 @@ impl VplSet for SceneVpls<'_> {
 /// One record's evaluation in progress: per VPL the RGB unoccluded and bounded
 /// contributions and their luminances, and the visibility the fans find.
 struct RecordPass<'s, 'a> {
-    rgb: &'s mut [(Rgb, Rgb)],
+    rgb: &'s mut RgbColumns,
     unoccluded: &'s mut [f32],
     bounded: &'s mut [f32],
     visible: &'s mut [bool],
@@ -400,9 +436,39 @@ impl RecordPass<'_, '_> {
     /// VPL `j`'s E² and E³, and their luminances as `RecordValues::set` keeps them.
     #[inline]
     fn store(&mut self, j: usize, c: Rgb, b: Rgb, lum_c: f32, lum_b: f32) {
-        self.rgb[j] = (c, b);
+        self.rgb.set(j, c, b);
         self.unoccluded[j] = lum_c.max(0.0);
         self.bounded[j] = lum_b.max(0.0);
+    }
+
+    /// [`RecordPass::store`] of eight evaluated lanes of VPLs `j0..j0 + 8`, as blocks.
+    #[inline]
+    fn store_group(&mut self, j0: usize, p: &PairLanes) {
+        let block = j0..j0 + LANES;
+        for k in 0..3 {
+            self.rgb.c[k][block.clone()].copy_from_slice(&p.c[k]);
+            self.rgb.b[k][block.clone()].copy_from_slice(&p.b[k]);
+        }
+        for (dst, src) in
+            [(&mut self.unoccluded[block.clone()], &p.lum_c), (&mut self.bounded[block], &p.lum_b)]
+        {
+            for (d, s) in dst.iter_mut().zip(src) {
+                *d = s.max(0.0);
+            }
+        }
+    }
+
+    /// The shadow rays of a group's lanes, in lane order.
+    #[inline]
+    fn push_rays(&mut self, g: &VplGroup, p: &PairLanes) {
+        let mut rays = p.ray;
+        while rays != 0 {
+            let i = rays.trailing_zeros() as usize;
+            rays &= rays - 1;
+            let side = (p.back >> i & 1) as usize;
+            let (j, class) = (g.index[i] as usize, p.class[i] as usize);
+            self.packets.push_lane(j, side, class, p.w(i), p.t_max[i], self.visible);
+        }
     }
 }
 
@@ -453,6 +519,7 @@ mod packet_tests {
         let bvh =
             SceneAccel::build_with(&scene, &BuildParams { max_flat_triangles: 0, ..BuildParams::default() });
         for accel in [r.context().accel, &bvh] {
+            let receivers = RecordReceivers::from_pixels(&receivers);
             let set = SceneVpls::new(PathContext { accel, ..r.context() }, &vpls, &receivers);
             let (mut packet, mut reference) = (RecordValues::default(), RecordValues::default());
             let (mut visible, mut occluded) = (0, 0);

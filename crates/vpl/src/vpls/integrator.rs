@@ -22,20 +22,20 @@
 
 use super::eval::Receiver;
 use super::exhaustive::{exhaustive_pixel, full_contribution, SceneVpls};
+use super::gbuffer::{CameraSurfaces, RecordReceivers};
 use super::{generate_vpls, VplParams, Vpls};
 use crate::cache::{
-    place_cache_points, CacheParams, GBufferView, ImportanceCache, OptimizeStats, SampleFeedback,
-    SampleHistory, SamplerKind,
+    place_on_surfaces, CacheParams, ImportanceCache, OptimizeStats, SampleFeedback, SampleHistory,
+    SamplerKind,
 };
 use filtrace_core::sampler::Sampler;
-use filtrace_core::{Image, Ray, Rgb, Vec2, Vec3};
+use filtrace_core::{Image, Ray, Rgb};
 use filtrace_render::film::FilmPixel;
 use filtrace_render::integrator::path::visible_surface;
 use filtrace_render::integrator::tiles::trace_tile;
 use filtrace_render::integrator::{
     CameraSample, FrameContext, Integrator, PassEnd, PathContext, PathParams, Split, Tile,
 };
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::Instant;
@@ -336,15 +336,9 @@ fn prepare_frame(
     times.vpl_generation_ms = ms(t);
     let t = Instant::now();
     let (width, height) = (frame.camera.width() as usize, frame.camera.height() as usize);
-    let receivers = gbuffer(frame);
-    let positions: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.p)).collect();
-    let normals: Vec<Vec3> = receivers.iter().map(|r| r.map_or(Vec3::ZERO, |r| r.si.n_s)).collect();
-    let cache = (!settings.ground_truth).then(|| {
-        let view = GBufferView { width, height, positions: &positions, normals: &normals };
-        build_cache(settings, frame, &vpls, &view, &receivers, previous)
-    });
+    let cache = (!settings.ground_truth).then(|| build_cache(settings, frame, &vpls, previous));
     times.cache_ms = ms(t);
-    let closest = (0..positions.len()).map(|_| AtomicU32::new(NO_DISTANCE)).collect();
+    let closest = (0..width * height).map(|_| AtomicU32::new(NO_DISTANCE)).collect();
     VplFrameData { vpls, cache: RwLock::new(cache), closest, width, times }
 }
 
@@ -358,39 +352,24 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// The surface through each pixel centre, with its BSDF (row-major).
-fn gbuffer(frame: &FrameContext) -> Vec<Option<Receiver>> {
-    let (ctx, camera) = (frame.ctx, frame.camera);
-    let w = camera.width() as usize;
-    let n = w * camera.height() as usize;
-    (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let ray = camera.generate_ray((i % w) as u32, (i / w) as u32, Vec2::splat(0.5));
-            ctx.intersect(&ray).map(|si| Receiver::new(si, ctx.bsdf(&si)))
-        })
-        .collect()
-}
-
 /// Places the cache points through the G-buffer and evaluates every VPL at each; an
 /// empty cache (every sampler then draws uniformly) for `uniform` and for a scene whose
-/// bounds are degenerate.
+/// bounds are degenerate. The G-buffer is traced where it is read only (`vpls/gbuffer.rs`):
+/// at the pixels the placement tries, and the receivers at the records' pixels.
 fn build_cache(
     settings: &VplSettings,
     frame: &FrameContext,
     vpls: &Vpls,
-    view: &GBufferView,
-    receivers: &[Option<Receiver>],
     previous: Option<&ImportanceCache>,
 ) -> ImportanceCache {
     let empty = || ImportanceCache::empty(vpls.len(), &settings.cache);
     if !settings.sampler.needs_cache() {
         return empty();
     }
-    let Ok(points) = place_cache_points(view, settings.cache.cache_points, frame.seed) else {
-        return empty();
-    };
-    let set = SceneVpls::new(frame.ctx, vpls, receivers);
+    let surfaces = CameraSurfaces { ctx: frame.ctx, camera: frame.camera };
+    let points = place_on_surfaces(&surfaces, settings.cache.cache_points, frame.seed);
+    let receivers = RecordReceivers::trace(&surfaces, &points);
+    let set = SceneVpls::new(frame.ctx, vpls, &receivers);
     let diagonal = frame.ctx.scene.bounds().extent().length();
     ImportanceCache::build(&set, points, diagonal, &settings.cache, previous).unwrap_or_else(|_| empty())
 }
@@ -399,6 +378,7 @@ fn build_cache(
 mod tests {
     use super::*;
     use crate::vpls::render_vpl_frame;
+    use filtrace_core::Vec2;
     use filtrace_render::{RenderSettings, Renderer};
     use std::sync::atomic::AtomicBool;
 

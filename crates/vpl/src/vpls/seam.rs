@@ -30,7 +30,7 @@ use filtrace_render::film::Film;
 use filtrace_render::memory::{bytes_of, image_bytes, MemoryEstimate};
 use filtrace_render::renderer::progressive_passes;
 use filtrace_render::Renderer;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::Instant;
 
 /// One rendered frame of the VPL integrator.
@@ -127,8 +127,11 @@ pub fn render_vpl_frame(
 /// Bytes the VPL integrator allocates for a `width x height` frame with `settings` on
 /// `threads` threads, rendered in passes of at most `max_pass` samples per pixel, beside
 /// the film and the outputs (the path tracer's [`filtrace_render::memory::plain_render`]):
-/// - the G-buffer: a receiver per pixel while the cache is built, positions and normals
-///   kept for the frame, and the cache-distance layer;
+/// - the G-buffer of the cache (`vpls/gbuffer.rs`): the placement's per-pixel flags (taken,
+///   and, for a top-up, the surface mask and the list of free pixels) and one receiver per
+///   record;
+/// - the cache-distance layer: per pixel the closest record's distance kept while
+///   shading, and the layer made from it;
 /// - the VPLs, twice (the frame's report copies them);
 /// - the importance cache, twice: the previous frame's stays alive while the next one
 ///   is built from it (its parameters are interpolated); per record three CDFs over the
@@ -159,19 +162,26 @@ pub fn frame_memory(
     let history = records * settings.cache.optimizer.history as u64;
     let feedback = pixels * max_pass as u64;
     MemoryEstimate::new(format!("the VPL integrator at {width}x{height}"))
-        .with("G-buffer", pixels * (bytes_of::<Option<Receiver>>(1) + bytes_of::<Vec3>(2)))
-        .with("cache distance", image_bytes(width, height, 1))
+        .with("G-buffer", cached as u64 * gbuffer_bytes(pixels, records))
+        .with("cache distance", pixels * size_of::<AtomicU32>() as u64 + image_bytes(width, height, 1))
         .with("VPLs", 2 * bytes_of::<Vpl>(vpls))
         .with("importance cache", 2 * records * per_record + scratch * cached as u64)
         .with("optimiser history", learns as u64 * bytes_of::<StoredSample>(history))
         .with("pass feedback", learns as u64 * 2 * bytes_of::<SampleFeedback>(feedback))
 }
 
+/// The cache's G-buffer: the placement's flags per pixel (`taken`, and for a top-up the
+/// surface mask and the free pixels' indices) and the records' receivers with their pixels.
+fn gbuffer_bytes(pixels: u64, records: u64) -> u64 {
+    pixels * (2 * size_of::<bool>() + size_of::<usize>()) as u64
+        + records * (size_of::<u32>() + size_of::<Option<Receiver>>()) as u64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cache::{CacheParams, ImportanceCache};
-    use crate::vpls::VplParams;
+    use crate::cache::{CacheParams, ImportanceCache, Technique};
+    use crate::vpls::{CameraSurfaces, RecordReceivers, VplParams};
     use filtrace_render::RenderSettings;
 
     fn animated_cornell() -> Renderer {
@@ -336,5 +346,49 @@ mod tests {
         assert!(learning.part("optimiser history") > 0 && learning.part("pass feedback") > 0);
         assert_eq!(frame_memory(512, 512, &balance, 2, 4).part("optimiser history"), 0);
         assert!(total(&balance) < total(&s));
+        // The G-buffer: a few bytes of flags per pixel, a receiver per record only.
+        let gbuffer = |s: &VplSettings| frame_memory(512, 512, s, 2, 4).part("G-buffer");
+        assert!(gbuffer(&s) < 512 * 512 * 12 + 2048 * 256, "{}", gbuffer(&s));
+        for s in [truth, VplSettings { sampler: SamplerKind::Uniform, ..s.clone() }] {
+            assert_eq!(gbuffer(&s), 0, "{:?}: no cache, no G-buffer", s.sampler);
+        }
+    }
+
+    /// The estimate against the structures a frame really allocates: the cache-distance
+    /// layer exactly, the records' receivers and CDFs (one cache of the two the estimate
+    /// counts) within it and not far below it.
+    #[test]
+    fn frame_memory_covers_what_a_frame_allocates() {
+        let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
+        let (w, h) = (40u32, 32u32);
+        let mut r =
+            Renderer::new(scene, RenderSettings { width: w, height: h, spp: 1, max_depth: 4, seed: 5 })
+                .expect("settings");
+        let s = VplSettings { sampler: SamplerKind::Balance, ..optimized() };
+        let frame = render_vpl_frame(&mut r, &s, 1, &AtomicBool::new(false)).unwrap().unwrap();
+        let estimate = frame_memory(w, h, &s, 1, 1);
+        let pixels = (w * h) as u64;
+        let layer = size_of_val(frame.cache_distance.data());
+        assert_eq!(estimate.part("cache distance"), pixels * 4 + layer as u64);
+        let cache = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
+        assert_eq!(cache.records().len(), s.cache.cache_points);
+        let points: Vec<_> = cache.records().iter().map(|rec| rec.point).collect();
+        let surfaces = CameraSurfaces { ctx: r.context(), camera: r.camera() };
+        let receivers = RecordReceivers::trace(&surfaces, &points).heap_bytes() as u64;
+        let flags = gbuffer_bytes(pixels, 0);
+        assert!(estimate.part("G-buffer") >= flags + receivers);
+        assert!(estimate.part("G-buffer") <= flags + 2 * receivers, "{}", estimate.part("G-buffer"));
+        let cdfs: usize = cache
+            .records()
+            .iter()
+            .flat_map(|rec| {
+                [Technique::Full, Technique::Unoccluded, Technique::Bounded].map(|t| rec.distribution(t))
+            })
+            .map(|d| d.expect("a table").heap_bytes())
+            .sum();
+        let one_cache = cache.records().len() * (size_of::<CacheRecord>() + size_of::<RecordParams>()) + cdfs;
+        let estimated = estimate.part("importance cache") / 2;
+        assert!(estimated >= one_cache as u64, "{estimated} < {one_cache}");
+        assert!(estimated <= 2 * one_cache as u64, "{estimated} > 2 x {one_cache}");
     }
 }

@@ -20,7 +20,7 @@ use crate::cache::RelaxedReceiver;
 use filtrace_core::cpu::Isa;
 use filtrace_core::{Rgb, Vec3};
 use filtrace_render::bsdf::SurfaceBsdf;
-use filtrace_render::integrator::lanes::{bits, from_bits, select, F8, LANES, M8, V8};
+use filtrace_render::integrator::lanes::{bits, from_bits, mask_words, select, F8, LANES, M8, U8, V8};
 use filtrace_render::surface::SHADOW_END_FRACTION;
 use std::f32::consts::FRAC_1_PI;
 
@@ -30,6 +30,8 @@ pub struct VplGroup {
     /// VPL index of each lane; lanes `live..` are padding (the last group).
     pub index: [u32; LANES],
     pub live: usize,
+    /// Eight VPLs in a row (`index[i] = index[0] + i`): the lanes are stored as blocks.
+    pub dense: bool,
     p: [[f32; LANES]; 3],
     /// The VPL's geometric normal (`Vpl::n`), which the bounded term relaxes.
     n: [[f32; LANES]; 3],
@@ -90,6 +92,9 @@ impl VplLanes {
             g.two_sided |= (two_sided as u8) << i;
             g.live += 1;
         }
+        for g in &mut lanes.groups {
+            g.dense = g.live == LANES && g.index[LANES - 1] - g.index[0] == (LANES - 1) as u32;
+        }
         lanes
     }
 }
@@ -110,6 +115,8 @@ pub struct PairLanes {
     pub back: u8,
     pub w: [[f32; LANES]; 3],
     pub t_max: [f32; LANES],
+    /// `filtrace_accel::fan_class` of each lane's direction.
+    pub class: [u32; LANES],
 }
 
 impl PairLanes {
@@ -304,7 +311,22 @@ fn pairs8<const A: bool>(g: &VplGroup, s: &SiteLanes<A>) -> PairLanes {
         back: bits(w.dot(s.n_g).lt(zero)),
         w: w.to_arrays(),
         t_max: t_max.to_array(),
+        class: fan_class8(w).to_array(),
     }
+}
+
+/// `filtrace_accel::fan_class` in eight lanes: the sign bits of `w` (the octant) plus 8
+/// times the axis of its largest magnitude (x on ties, then y).
+#[inline(always)]
+fn fan_class8<const A: bool>(w: V8<A>) -> U8<A> {
+    let sign = |c: F8<A>| c.to_bits().shr::<31>();
+    let octant = sign(w.x).xor(sign(w.y).shl::<1>()).xor(sign(w.z).shl::<2>());
+    let a = w.abs();
+    let x_max = a.x.ge(a.y) & a.x.ge(a.z);
+    let eight = U8::splat(8);
+    // `kz = !x_max · (1 + (a.y < a.z))`, times 8.
+    let kz8 = mask_words(!x_max).and(eight.wrapping_add(mask_words(a.y.lt(a.z)).and(eight)));
+    octant.xor(kz8)
 }
 
 /// `RelaxedReceiver::towards` with the receiver's cosine `cos0_in = n0 · w` and the
@@ -331,6 +353,7 @@ mod tests {
     use super::*;
     use crate::cache::{evaluate_each_vpl, CachePoint, RecordValues, Region};
     use crate::vpls::{generate_vpls, SceneVpls, VplParams};
+    use filtrace_accel::fan_class;
     use filtrace_core::Vec2;
     use filtrace_render::{RenderSettings, Renderer};
     use filtrace_scene::{Bsdf, Light, Texturable};
@@ -407,9 +430,12 @@ mod tests {
                     wi_local.z = -wi_local.z.abs();
                 }
             }
+            let receivers = crate::vpls::RecordReceivers::from_pixels(&receivers);
             let set = SceneVpls::new(r.context(), &vpls, &receivers);
             let lanes = VplLanes::new(&vpls.vpls);
             assert!(lanes.groups.len() > 20 && lanes.others.len() > 20, "both paths are tested");
+            let dense = lanes.groups.iter().filter(|g| g.dense).count();
+            assert!(dense > 0 && dense < lanes.groups.len(), "groups stored as blocks and lane by lane");
             let (mut fast, mut reference) = (RecordValues::default(), RecordValues::default());
             for isa in Isa::supported() {
                 for (k, site) in sites.iter().enumerate() {
@@ -424,6 +450,43 @@ mod tests {
                     let totals = |v: &RecordValues| v.totals.map(|t| t.to_array().map(f32::to_bits));
                     assert_eq!(totals(&fast), totals(&reference), "totals: {what}");
                 }
+            }
+        }
+    }
+
+    /// The fan class computed in the lanes is `filtrace_accel::fan_class` of each lane's
+    /// direction, at every instruction set; signed zeros and ties (rare towards VPLs) on
+    /// a grid of directions in the portable lanes.
+    #[test]
+    fn lane_fan_classes_equal_fan_class() {
+        let r = mixed_cornell();
+        let ctx = r.context();
+        let vpls =
+            generate_vpls(&ctx, &r.path_params(), &VplParams { seed: 7, ..VplParams::with_count(300) });
+        let lanes = VplLanes::new(&vpls.vpls);
+        let mut checked = 0;
+        for i in (0..400).step_by(7) {
+            let ray = r.camera().generate_ray(i % 20, i / 20, Vec2::splat(0.5));
+            let Some(si) = ctx.intersect(&ray) else { continue };
+            let rx = Receiver::new(si, ctx.bsdf(&si));
+            let relaxed = RelaxedReceiver::new(rx.si.n_s, 0.1, 0.2);
+            let Some(site) = DiffuseSite::new(&rx, &relaxed, vpls.bound) else { continue };
+            for isa in Isa::supported() {
+                evaluate_groups(&lanes, &site, isa, |g, p| {
+                    for i in (0..g.live).filter(|&i| p.valid >> i & 1 != 0) {
+                        assert_eq!(p.class[i] as usize, fan_class(p.w(i)), "{isa:?}, {:?}", p.w(i));
+                        checked += 1;
+                    }
+                });
+            }
+        }
+        assert!(checked > 1000, "{checked} lanes checked");
+        let values = [0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, f32::MIN_POSITIVE, -2.0];
+        for (x, y) in values.iter().flat_map(|&x| values.map(|y| (x, y))) {
+            let w = V8::<false>::from_arrays(&[[x; LANES], [y; LANES], values]);
+            let classes = fan_class8(w).to_array();
+            for (i, &z) in values.iter().enumerate() {
+                assert_eq!(classes[i] as usize, fan_class(Vec3::new(x, y, z)), "({x}, {y}, {z})");
             }
         }
     }

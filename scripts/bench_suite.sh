@@ -50,7 +50,7 @@ while [ $# -gt 0 ]; do
         --skip-rays) RAYS_ON=0; shift; continue ;;
         --skip-scaling) SCALING_ON=0; shift; continue ;;
         --report-only) REPORT_ONLY=1; shift; continue ;;
-        -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,24p' "$0"; exit 0 ;;
         *) echo "bench_suite.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     [ $# -ge 2 ] || { echo "bench_suite.sh: $1 needs a value" >&2; exit 2; }

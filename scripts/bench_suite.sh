@@ -7,11 +7,15 @@
 #   scripts/bench_suite.sh [--filtrace PATH] [--scenes a,b,...] [--spp N] [--res N]
 #       [--max-depth N] [--threads T] [--rays N] [--repeats K] [--rounds R]
 #       [--scaling "1 2 4 ..."] [--scaling-scenes a,b] [--filter-res WxH] [--frames N]
-#       [--skip-peers] [--skip-rays] [--skip-scaling] [--out DIR] [--report-only]
+#       [--embree native|embreex|both] [--skip-peers] [--skip-rays] [--skip-scaling] [--out DIR]
+#       [--report-only]
 #
 # Part 1, per scene and round (A B A B ...): filtrace path tracing, Mitsuba 3 on the same
 # scene (dumped by `filtrace bench suite --dump-scene-json`), filtrace rays on 1 thread,
-# Embree 4 on the same world-space triangles and ray distributions on 1 thread.
+# Embree on the same world-space triangles and ray distributions on 1 thread: --embree native
+# (the default) calls Embree 3 from C (scripts/embree_native.c through `embree_bench.py
+# --native`: needs cc and libembree3), embreex calls Embree 4 through embreex (its per-call
+# Python overhead flatters filtrace), both runs both (the table adds embreex's columns).
 # Part 2, per thread count: the path tracer (`bench suite --threads T`), À-Trous and the
 # guided filter at --filter-res (`RAYON_NUM_THREADS=T bench filters`) and the filtered
 # pipeline (`bench pipeline --threads T`).
@@ -24,7 +28,7 @@ FILTRACE=target/release/filtrace
 SCENES=cornell,bunny-room,grass,grass-1m,engine,bunny,teapot
 SPP=64 RES=512 MAX_DEPTH=8 THREADS=$(nproc) RAYS=1048576 REPEATS=3 ROUNDS=2
 SCALING="" SCALING_SCENES=cornell,bunny-room FILTER_RES=1920x1080 FRAMES=20
-PEERS=1 RAYS_ON=1 SCALING_ON=1 OUT="" REPORT_ONLY=0
+PEERS=1 RAYS_ON=1 SCALING_ON=1 OUT="" REPORT_ONLY=0 EMBREE=native
 while [ $# -gt 0 ]; do
     case "$1" in
         --filtrace) FILTRACE=$2 ;;
@@ -40,12 +44,13 @@ while [ $# -gt 0 ]; do
         --scaling-scenes) SCALING_SCENES=$2 ;;
         --filter-res) FILTER_RES=$2 ;;
         --frames) FRAMES=$2 ;;
+        --embree) EMBREE=$2 ;;
         --out) OUT=$2 ;;
         --skip-peers) PEERS=0; shift; continue ;;
         --skip-rays) RAYS_ON=0; shift; continue ;;
         --skip-scaling) SCALING_ON=0; shift; continue ;;
         --report-only) REPORT_ONLY=1; shift; continue ;;
-        -h|--help) sed -n '2,23p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,24p' "$0"; exit 0 ;;
         *) echo "bench_suite.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     [ $# -ge 2 ] || { echo "bench_suite.sh: $1 needs a value" >&2; exit 2; }
@@ -57,8 +62,18 @@ if [ "$REPORT_ONLY" = 1 ]; then
 else
     [ -x "$FILTRACE" ] || { echo "bench_suite.sh: no filtrace binary at $FILTRACE (cargo build --release -p filtrace, or --filtrace PATH)" >&2; exit 2; }
 fi
-if [ "$PEERS" = 1 ] && ! python3 -c "import mitsuba, drjit, embreex, numpy" 2>/dev/null; then
+case "$EMBREE" in
+    native|embreex|both) ;;
+    *) echo "bench_suite.sh: --embree is native, embreex or both, not $EMBREE" >&2; exit 2 ;;
+esac
+EMBREEX_MOD=""
+[ "$EMBREE" = native ] || EMBREEX_MOD=", embreex"
+if [ "$PEERS" = 1 ] && ! python3 -c "import mitsuba, drjit, numpy$EMBREEX_MOD" 2>/dev/null; then
     echo "bench_suite.sh: the peers need: pip install mitsuba embreex trimesh; apt-get install -y libllvm19 (or --skip-peers)" >&2
+    exit 2
+fi
+if [ "$PEERS" = 1 ] && [ "$RAYS_ON" = 1 ] && [ "$EMBREE" != embreex ] && ! command -v "${CC:-cc}" >/dev/null; then
+    echo "bench_suite.sh: --embree $EMBREE needs a C compiler (apt-get install gcc libembree3-3), or --embree embreex" >&2
     exit 2
 fi
 if [ -z "$SCALING" ]; then
@@ -97,7 +112,11 @@ for round in $(seq 1 "$ROUNDS"); do
         if [ "$RAYS_ON" = 1 ]; then
             run "$OUT/raw/filtrace_rays_${dir}_$round.json" "$FILTRACE" bench suite --scenes "$scene" --no-render \
                 --res "${RES}x$RES" --rays "$RAYS" --ray-threads 1 --repeats "$REPEATS" --json
-            if [ "$PEERS" = 1 ]; then
+            if [ "$PEERS" = 1 ] && [ "$EMBREE" != embreex ]; then
+                run "$OUT/raw/embree_native_${dir}_$round.json" python3 "$HERE/embree_bench.py" --native \
+                    --scene-dir "$OUT/scenes/$dir" --rays "$RAYS" --repeats "$REPEATS" --json
+            fi
+            if [ "$PEERS" = 1 ] && [ "$EMBREE" != native ]; then
                 run "$OUT/raw/embree_${dir}_$round.json" python3 "$HERE/embree_bench.py" --scene-dir "$OUT/scenes/$dir" \
                     --res "${RES}x$RES" --rays "$RAYS" --threads 1 --repeats "$REPEATS" --json
             fi
@@ -168,9 +187,16 @@ def embree_rate(report, query):
     return m.get("mrays_per_cpu_s") or m["mrays"]
 
 
+# Embree native (embree_native.c) when measured, else embreex; with both, embreex's columns too.
+have_native = bool(glob.glob(os.path.join(raw, "embree_native_*.json")))
+have_embreex = bool(glob.glob(os.path.join(raw, "embree_*.json"))) and any(
+    not os.path.basename(p).startswith("embree_native_") for p in glob.glob(os.path.join(raw, "embree_*.json")))
+embree_name = "Embree native" if have_native else "Embree (embreex)"
+extra = have_native and have_embreex
 lines = ["| scene | triangles | filtrace M samples/s | Mitsuba M samples/s | ratio (rounds) | mean luminance filtrace / Mitsuba "
-         "| closest: filtrace / Embree Mrays per CPU-s | ratio (rounds) | any: filtrace / Embree | ratio (rounds) |",
-         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+         f"| closest: filtrace / {embree_name} Mrays per CPU-s | ratio (rounds) | any: filtrace / {embree_name} | ratio (rounds) |"
+         + (" closest: filtrace / embreex | ratio (rounds) | any: filtrace / embreex | ratio (rounds) |" if extra else ""),
+         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---:|" * 4 if extra else "")]
 for scene in scenes:
     d = "".join(c if (c.isascii() and c.isalnum()) or c in "._-" else "_" for c in scene)
     if not glob.glob(os.path.join(raw, f"*_{d}_*.json")):
@@ -178,7 +204,8 @@ for scene in scenes:
     fr = [doc["scenes"][0] for doc in load(f"filtrace_render_{d}_*.json")]
     mi = load(f"mitsuba_{d}_*.json")
     frays = [doc["scenes"][0]["rays"] for doc in load(f"filtrace_rays_{d}_*.json")]
-    em = load(f"embree_{d}_*.json")
+    em = load(f"embree_native_{d}_*.json") if have_native else load(f"embree_{d}_*.json")
+    peers = [em] + ([load(f"embree_{d}_*.json")] if extra else [])
     ft_sps = [s["render"][0]["samples_per_s_best"] / 1e6 for s in fr]
     mi_sps = [m["samples_per_s_best"] / 1e6 for m in mi]
     tris = fr[0]["triangles"] if fr else (frays[0]["triangles"] if frays else "-")
@@ -186,11 +213,12 @@ for scene in scenes:
     if fr and mi:
         lum_ratio = fmt(lum(fr[-1]["render"][0]["mean_rgb"]) / max(lum(mi[-1]["mean_rgb"]), 1e-12), 3)
     cells = []
-    for fq, eq in (("incoherent_closest", "incoherent_closest"), ("incoherent_any", "incoherent_any")):
-        a = [ray_rate(r, fq) for r in frays]
-        b = [embree_rate(e, eq) for e in em]
-        cells.append(f"{fmt(statistics.median(a)) if a else '-'} / {fmt(statistics.median(b)) if b else '-'}")
-        cells.append(ratio_cell(a, b))
+    for docs in peers:
+        for q in ("incoherent_closest", "incoherent_any"):
+            a = [ray_rate(r, q) for r in frays]
+            b = [embree_rate(e, q) for e in docs]
+            cells.append(f"{fmt(statistics.median(a)) if a else '-'} / {fmt(statistics.median(b)) if b else '-'}")
+            cells.append(ratio_cell(a, b))
     lines.append(f"| {scene} | {tris} | {fmt(statistics.median(ft_sps)) if ft_sps else '-'} "
                  f"| {fmt(statistics.median(mi_sps)) if mi_sps else '-'} | {ratio_cell(ft_sps, mi_sps)} | {lum_ratio} "
                  f"| {' | '.join(cells)} |")

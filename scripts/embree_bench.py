@@ -13,6 +13,15 @@ world-space triangles in one Embree mesh), same ray distributions and counts:
 (The generators differ - numpy vs SplitMix64 - so the rays are the same distribution,
 not the same bits.)
 
+With --native the incoherent sets are cast by scripts/embree_native.c instead: Embree 3
+(the system's libembree3, Debian 3.13.5) called from C, one rtcIntersect1 / rtcOccluded1
+per ray and rtcIntersect8 / rtcOccluded8 on groups of eight, on the same one-geometry
+mesh, rays drawn by filtrace's own generator (SplitMix64, seed 7 as `filtrace bench suite`),
+so the same rays bit for bit. It measures Embree without embreex's per-call overhead. The
+binary is compiled at run time with `cc` into a temporary directory (a measurement tool, not
+a dependency); headers from $EMBREE_INCLUDE, /usr/include or Mitsuba's bundled embree3,
+library from $EMBREE_LIB or the system's libembree3.so.3.
+
 Reports wall-clock Mrays/s and Mrays per CPU-second of the calling thread (embreex casts
 rtcIntersect1 in a loop on that thread; the BVH build happens before timing). With
 --threads T > 1 the rays are split over T Python threads: this only scales if embreex
@@ -20,6 +29,7 @@ releases the GIL, which the script reports rather than assumes.
 
     pip install embreex trimesh
     python3 scripts/embree_bench.py {MESH.obj | --scene-dir DIR} [--rays N] [--res WxH] [--threads T] [--repeats K] [--json]
+        [--native [--quality medium|high] [--seed S]]
 """
 import argparse
 import json
@@ -28,8 +38,6 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 
 
 def read_ply(path):
@@ -125,6 +133,105 @@ def measure(scene, o, d, query, threads, repeats):
     return out
 
 
+def embree3_include(cache):
+    """A directory holding embree3/rtcore.h usable from C. Mitsuba's bundled headers put the
+    API in a C++ namespace (its own build); Debian's libembree3 has none, so a copy with the
+    namespace switched off is made in `cache`."""
+    import importlib.util
+    import shutil
+
+    candidates = [os.environ.get("EMBREE_INCLUDE", ""), "/usr/include", "/usr/local/include"]
+    spec = importlib.util.find_spec("mitsuba")
+    if spec and spec.submodule_search_locations:
+        candidates += [os.path.join(p, "include") for p in spec.submodule_search_locations]
+    for inc in candidates:
+        config = os.path.join(inc, "embree3", "rtcore_config.h")
+        if not inc or not os.path.isfile(config):
+            continue
+        with open(config) as f:
+            text = f.read()
+        if "\n#define EMBREE_API_NAMESPACE\n" not in text:
+            return inc
+        copy = os.path.join(cache, "include")
+        shutil.rmtree(copy, ignore_errors=True)
+        shutil.copytree(os.path.join(inc, "embree3"), os.path.join(copy, "embree3"))
+        with open(os.path.join(copy, "embree3", "rtcore_config.h"), "w") as f:
+            f.write(text.replace("\n#define EMBREE_API_NAMESPACE\n", "\n"))
+        return copy
+    raise SystemExit("embree_bench.py --native: no Embree 3 headers (embree3/rtcore_config.h) in "
+                     f"{[c for c in candidates if c]}; set EMBREE_INCLUDE, or apt-get install libembree-dev")
+
+
+def embree3_library():
+    import glob
+
+    env = os.environ.get("EMBREE_LIB")
+    if env:
+        if not os.path.isfile(env):
+            raise SystemExit(f"embree_bench.py --native: EMBREE_LIB={env} is not a file")
+        return env
+    for d in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib", "/usr/local/lib"):
+        found = sorted(glob.glob(os.path.join(d, "libembree3.so*")))
+        if found:
+            return found[0]
+    raise SystemExit("embree_bench.py --native: no libembree3.so in the system library directories; "
+                     "set EMBREE_LIB=/path/to/libembree3.so.3, or apt-get install libembree3-3")
+
+
+def native_binary():
+    """scripts/embree_native.c compiled with `cc -O2` into a temporary directory keyed by the
+    source, the library and the compiler (reused while those stay the same)."""
+    import hashlib
+    import shutil
+    import subprocess
+    import tempfile
+
+    src = os.path.join(os.path.dirname(os.path.abspath(__file__)), "embree_native.c")
+    cc = shutil.which(os.environ.get("CC", "cc"))
+    if cc is None:
+        raise SystemExit("embree_bench.py --native: no C compiler (`cc`, or set CC); apt-get install gcc")
+    lib = embree3_library()
+    with open(src, "rb") as f:
+        key = hashlib.sha1(f.read() + f"{cc}\0{lib}".encode()).hexdigest()[:12]
+    cache = os.path.join(tempfile.gettempdir(), f"filtrace-embree-native-{key}")
+    exe = os.path.join(cache, "embree_native")
+    if os.access(exe, os.X_OK):
+        return exe
+    os.makedirs(cache, exist_ok=True)
+    inc = embree3_include(cache)
+    cmd = [cc, "-O2", "-std=c11", "-D_DEFAULT_SOURCE", "-I", inc, src, "-o", exe + ".tmp", lib, "-lm"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"embree_bench.py --native: compiling failed: {' '.join(cmd)}\n{done.stderr}")
+    os.replace(exe + ".tmp", exe)
+    return exe
+
+
+def run_native(tris, name, a):
+    """The incoherent sets through scripts/embree_native.c (see the module docs)."""
+    import subprocess
+    import tempfile
+
+    exe = native_binary()
+    with tempfile.TemporaryDirectory(prefix="embree-native-") as tmp:
+        path = os.path.join(tmp, "tris.bin")
+        with open(path, "wb") as f:
+            # A triangle soup, as embreex's TriangleMesh builds it: 3 vertices per triangle.
+            n = len(tris)
+            np.array([3 * n], "<u4").tofile(f)
+            np.ascontiguousarray(tris, "<f4").tofile(f)
+            np.array([n], "<u4").tofile(f)
+            np.arange(3 * n, dtype="<u4").tofile(f)
+        cmd = [exe, path, "--rays", str(a.rays), "--repeats", str(a.repeats), "--seed", str(a.seed),
+               "--quality", a.quality]
+        done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"embree_bench.py: {exe} failed ({done.returncode}): {done.stderr.strip()}")
+    rep = json.loads(done.stdout)
+    rep["mesh"] = name
+    return rep
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("mesh", nargs="?", help="an OBJ file (or use --scene-dir)")
@@ -133,9 +240,13 @@ def main():
     ap.add_argument("--res", default="1024x1024")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--seed", type=int, default=7, help="filtrace's ray bench seed; numpy's generator for embreex")
+    ap.add_argument("--native", action="store_true", help="Embree 3 from C on the incoherent sets (embree_native.c)")
+    ap.add_argument("--quality", choices=("medium", "high"), default="medium", help="--native: BVH build quality")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
+    if a.native and a.threads != 1:
+        ap.error("--native measures one thread")
     w, h = (int(x) for x in a.res.split("x"))
 
     if (a.mesh is None) == (a.scene_dir is None):
@@ -147,6 +258,11 @@ def main():
 
         mesh = trimesh.load(a.mesh, process=False, force="mesh")
         tris, name = mesh.vertices[mesh.faces].astype(np.float32), a.mesh
+    if a.native:
+        return report_native(run_native(tris, name, a), a.json)
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
     t0 = time.perf_counter()
     scene = rtcore_scene.EmbreeScene()
     TriangleMesh(scene, tris)
@@ -173,6 +289,19 @@ def main():
         m = rep[k]
         cpu = f"{m['mrays_per_cpu_s']:.2f}" if "mrays_per_cpu_s" in m else "n/a"
         print(f"| {k.replace('_', ' ')} | {m['mrays']:.2f} | {cpu} | {m['hit_fraction']:.3f} |")
+
+
+def report_native(rep, as_json):
+    if as_json:
+        print(json.dumps(rep, indent=2))
+        return
+    print(f"embree {rep['embree']} (native C) `{rep['mesh']}`: {rep['triangles']} triangles, 1 thread, "
+          f"{rep['build_quality']} BVH")
+    print("| query | Mrays per CPU-s (best) | median | wall Mrays/s | hit fraction |\n|---|---:|---:|---:|---:|")
+    for k in ("incoherent_closest", "incoherent_any", "packet8_incoherent_closest", "packet8_incoherent_any"):
+        m = rep[k]
+        print(f"| {k.replace('_', ' ')} | {m['mrays_per_cpu_s']:.2f} | {m['mrays_per_cpu_s_median']:.2f} "
+              f"| {m['mrays']:.2f} | {m['hit_fraction']:.3f} |")
 
 
 if __name__ == "__main__":

@@ -33,9 +33,11 @@ pub struct VplDraw {
     pub weight: f32,
     /// Mixture pmf `q(j)` (one-sample samplers; 0 for α-max).
     pub pdf: f32,
-    /// `P_k(j) = Σ_l w_l p_lk(j)` per technique (0 for disabled ones).
+    /// `P_k(j) = Σ_l w_l p_lk(j)` per technique (0 for disabled ones; `optimized` and
+    /// α-max only).
     pub interpolated_pmf: [f32; TECHNIQUES],
-    /// `Q_k(j) = Σ_l w_l L_lk p_lk(j)`, the luminance control variates at β = 1.
+    /// `Q_k(j) = Σ_l w_l L_lk p_lk(j)`, the luminance control variates at β = 1
+    /// (`optimized` only).
     pub interpolated_cv: [f32; TECHNIQUES],
 }
 
@@ -130,10 +132,16 @@ impl ImportanceCache {
     ) -> ([[f32; TECHNIQUES]; MAX_NEIGHBOURS], [[f32; TECHNIQUES]; MAX_NEIGHBOURS]) {
         let (mut alpha, mut beta) =
             ([[0.0; TECHNIQUES]; MAX_NEIGHBOURS], [[0.0; TECHNIQUES]; MAX_NEIGHBOURS]);
-        let prior = (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
-        for (s, (l, _)) in nb.iter().enumerate() {
-            (alpha[s], beta[s]) =
-                if optimized { (self.params[l].mixture(), self.params[l].beta) } else { prior };
+        if optimized {
+            for (s, (l, _)) in nb.iter().enumerate() {
+                (alpha[s], beta[s]) = (self.params[l].mixture(), self.params[l].beta);
+            }
+        } else {
+            let prior =
+                (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
+            for (a, b) in alpha.iter_mut().zip(&mut beta).take(nb.len()) {
+                (*a, *b) = prior;
+            }
         }
         (alpha, beta)
     }
@@ -171,8 +179,11 @@ impl ImportanceCache {
             for t in techniques.techniques() {
                 let (k, p) = (t as usize, r.pmf(t, j));
                 d.pdf += w * alpha[s][k] * p;
-                d.interpolated_pmf[k] += w * p;
-                d.interpolated_cv[k] += w * p * r.luminance_total(t);
+                // Only the learning sampler's feedback reads them.
+                if optimized {
+                    d.interpolated_pmf[k] += w * p;
+                    d.interpolated_cv[k] += w * p * r.luminance_total(t);
+                }
                 if cv {
                     h += (w * beta[s][k] * p) * r.total(t);
                     c += (w * beta[s][k]) * r.total(t);
@@ -198,20 +209,9 @@ impl ImportanceCache {
         }
         let (techniques, confidences) = (&techniques[..m], &confidences[..m]);
         for (own, &t) in techniques.iter().enumerate() {
-            let (u, mut acc, mut l) = (next(), 0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
-            for (slot, w) in nb.iter() {
-                l = slot;
-                acc += w;
-                if u < acc {
-                    break;
-                }
-            }
+            let l = pick_record(&nb, next());
             let j = self.records[l].sample(t, next());
-            let mut pmfs = [0.0f32; TECHNIQUES];
-            for (i, &ti) in techniques.iter().enumerate() {
-                pmfs[i] = nb.iter().map(|(l, w)| w * self.records[l].pmf(ti, j)).sum();
-            }
-            if alpha_max_owner(&pmfs[..m], confidences) == own && pmfs[own] > 0.0 {
+            if let Some(pmfs) = self.owned_pmfs(&nb, techniques, confidences, own, j) {
                 let mut d = VplDraw { vpl: j as u32, weight: 1.0 / pmfs[own], ..VplDraw::default() };
                 for (i, &ti) in techniques.iter().enumerate() {
                     d.interpolated_pmf[ti as usize] = pmfs[i];
@@ -220,4 +220,52 @@ impl ImportanceCache {
             }
         }
     }
+
+    /// `P_i(j) = Σ_l w_l p_li(j)` of the enabled techniques when technique `own` owns VPL
+    /// `j` under α-max (and `P_own(j) > 0`), else `None`. The later techniques are read
+    /// first and the first whose `c_i P_i(j)` beats `P_own(j)` settles it: a rejected
+    /// draw, the common case, reads only part of the M × m pmfs. An accepted draw has
+    /// them all and `alpha_max_owner` decides on exactly the values it always saw.
+    fn owned_pmfs(
+        &self,
+        nb: &Neighbours,
+        techniques: &[Technique],
+        confidences: &[f32],
+        own: usize,
+        j: usize,
+    ) -> Option<[f32; TECHNIQUES]> {
+        let interpolated =
+            |t: Technique| -> f32 { nb.iter().map(|(l, w)| w * self.records[l].pmf(t, j)).sum() };
+        let mut p = [0.0f32; TECHNIQUES];
+        p[own] = interpolated(techniques[own]);
+        if !(p[own] > 0.0) {
+            return None;
+        }
+        for (i, &t) in techniques.iter().enumerate().skip(own + 1) {
+            p[i] = interpolated(t);
+            // Then `max_{i > own} c_i P_i > P_own`: `own` fails its own condition.
+            if confidences[i] * p[i] > p[own] {
+                return None;
+            }
+        }
+        for (pi, &t) in p.iter_mut().zip(techniques).take(own) {
+            *pi = interpolated(t);
+        }
+        (alpha_max_owner(&p[..techniques.len()], confidences) == own).then_some(p)
+    }
+}
+
+/// The record `l` of the first slot whose cumulative weight exceeds `u` (the last one
+/// when rounding leaves `u` above the sum): `l ~ w_l`.
+#[inline]
+fn pick_record(nb: &Neighbours, u: f32) -> usize {
+    let (mut acc, mut l) = (0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
+    for (slot, w) in nb.iter() {
+        l = slot;
+        acc += w;
+        if u < acc {
+            break;
+        }
+    }
+    l
 }

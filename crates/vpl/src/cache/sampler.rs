@@ -209,9 +209,20 @@ impl ImportanceCache {
         }
         let (techniques, confidences) = (&techniques[..m], &confidences[..m]);
         for (own, &t) in techniques.iter().enumerate() {
-            let l = pick_record(&nb, next());
+            let (u, mut acc, mut l) = (next(), 0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
+            for (slot, w) in nb.iter() {
+                l = slot;
+                acc += w;
+                if u < acc {
+                    break;
+                }
+            }
             let j = self.records[l].sample(t, next());
-            if let Some(pmfs) = self.owned_pmfs(&nb, techniques, confidences, own, j) {
+            let mut pmfs = [0.0f32; TECHNIQUES];
+            for (i, &ti) in techniques.iter().enumerate() {
+                pmfs[i] = nb.iter().map(|(l, w)| w * self.records[l].pmf(ti, j)).sum();
+            }
+            if alpha_max_owner(&pmfs[..m], confidences) == own && pmfs[own] > 0.0 {
                 let mut d = VplDraw { vpl: j as u32, weight: 1.0 / pmfs[own], ..VplDraw::default() };
                 for (i, &ti) in techniques.iter().enumerate() {
                     d.interpolated_pmf[ti as usize] = pmfs[i];
@@ -220,52 +231,4 @@ impl ImportanceCache {
             }
         }
     }
-
-    /// `P_i(j) = Σ_l w_l p_li(j)` of the enabled techniques when technique `own` owns VPL
-    /// `j` under α-max (and `P_own(j) > 0`), else `None`. The later techniques are read
-    /// first and the first whose `c_i P_i(j)` beats `P_own(j)` settles it: a rejected
-    /// draw, the common case, reads only part of the M × m pmfs. An accepted draw has
-    /// them all and `alpha_max_owner` decides on exactly the values it always saw.
-    fn owned_pmfs(
-        &self,
-        nb: &Neighbours,
-        techniques: &[Technique],
-        confidences: &[f32],
-        own: usize,
-        j: usize,
-    ) -> Option<[f32; TECHNIQUES]> {
-        let interpolated =
-            |t: Technique| -> f32 { nb.iter().map(|(l, w)| w * self.records[l].pmf(t, j)).sum() };
-        let mut p = [0.0f32; TECHNIQUES];
-        p[own] = interpolated(techniques[own]);
-        if !(p[own] > 0.0) {
-            return None;
-        }
-        for (i, &t) in techniques.iter().enumerate().skip(own + 1) {
-            p[i] = interpolated(t);
-            // Then `max_{i > own} c_i P_i > P_own`: `own` fails its own condition.
-            if confidences[i] * p[i] > p[own] {
-                return None;
-            }
-        }
-        for (pi, &t) in p.iter_mut().zip(techniques).take(own) {
-            *pi = interpolated(t);
-        }
-        (alpha_max_owner(&p[..techniques.len()], confidences) == own).then_some(p)
-    }
-}
-
-/// The record `l` of the first slot whose cumulative weight exceeds `u` (the last one
-/// when rounding leaves `u` above the sum): `l ~ w_l`.
-#[inline]
-fn pick_record(nb: &Neighbours, u: f32) -> usize {
-    let (mut acc, mut l) = (0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
-    for (slot, w) in nb.iter() {
-        l = slot;
-        acc += w;
-        if u < acc {
-            break;
-        }
-    }
-    l
 }

@@ -13,6 +13,7 @@
 /// the m distributions at `x` and their confidences `c[i]`, in order. Scans from the back
 /// once: `O(m)`. Returns `p.len() - 1` when nothing else qualifies (the last distribution
 /// always satisfies the condition: its max is over an empty set).
+#[inline]
 pub fn alpha_max_owner(p: &[f32], c: &[f32]) -> usize {
     debug_assert_eq!(p.len(), c.len());
     let m = p.len();

@@ -33,9 +33,11 @@ pub struct VplDraw {
     pub weight: f32,
     /// Mixture pmf `q(j)` (one-sample samplers; 0 for α-max).
     pub pdf: f32,
-    /// `P_k(j) = Σ_l w_l p_lk(j)` per technique (0 for disabled ones).
+    /// `P_k(j) = Σ_l w_l p_lk(j)` per technique (0 for disabled ones; `optimized` and
+    /// α-max only).
     pub interpolated_pmf: [f32; TECHNIQUES],
-    /// `Q_k(j) = Σ_l w_l L_lk p_lk(j)`, the luminance control variates at β = 1.
+    /// `Q_k(j) = Σ_l w_l L_lk p_lk(j)`, the luminance control variates at β = 1
+    /// (`optimized` only).
     pub interpolated_cv: [f32; TECHNIQUES],
 }
 
@@ -130,10 +132,16 @@ impl ImportanceCache {
     ) -> ([[f32; TECHNIQUES]; MAX_NEIGHBOURS], [[f32; TECHNIQUES]; MAX_NEIGHBOURS]) {
         let (mut alpha, mut beta) =
             ([[0.0; TECHNIQUES]; MAX_NEIGHBOURS], [[0.0; TECHNIQUES]; MAX_NEIGHBOURS]);
-        let prior = (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
-        for (s, (l, _)) in nb.iter().enumerate() {
-            (alpha[s], beta[s]) =
-                if optimized { (self.params[l].mixture(), self.params[l].beta) } else { prior };
+        if optimized {
+            for (s, (l, _)) in nb.iter().enumerate() {
+                (alpha[s], beta[s]) = (self.params[l].mixture(), self.params[l].beta);
+            }
+        } else {
+            let prior =
+                (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
+            for (a, b) in alpha.iter_mut().zip(&mut beta).take(nb.len()) {
+                (*a, *b) = prior;
+            }
         }
         (alpha, beta)
     }
@@ -171,8 +179,11 @@ impl ImportanceCache {
             for t in techniques.techniques() {
                 let (k, p) = (t as usize, r.pmf(t, j));
                 d.pdf += w * alpha[s][k] * p;
-                d.interpolated_pmf[k] += w * p;
-                d.interpolated_cv[k] += w * p * r.luminance_total(t);
+                // Only the learning sampler's feedback reads them.
+                if optimized {
+                    d.interpolated_pmf[k] += w * p;
+                    d.interpolated_cv[k] += w * p * r.luminance_total(t);
+                }
                 if cv {
                     h += (w * beta[s][k] * p) * r.total(t);
                     c += (w * beta[s][k]) * r.total(t);

@@ -6,6 +6,7 @@ mod alpha_max;
 mod distributions;
 mod optimize;
 mod placement;
+mod sampler_reference;
 mod search;
 mod unbiased;
 

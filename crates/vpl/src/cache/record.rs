@@ -64,6 +64,15 @@ impl CacheRecord {
         }
     }
 
+    /// `p_t(j)` of every technique at once, indexed by `Technique as usize` (the same
+    /// values as [`CacheRecord::pmf`]): a shading point reads one VPL's pmfs per record
+    /// in one call instead of one dispatch per technique.
+    #[inline]
+    pub fn pmfs(&self, j: usize) -> [f32; TECHNIQUES] {
+        let [full, unoccluded, bounded] = &self.distributions;
+        [full.pmf(j), unoccluded.pmf(j), bounded.pmf(j), self.pmf(Technique::Uniform, j)]
+    }
+
     /// Draws a VPL from distribution `t` with `u` in `[0, 1)` (binary search of the CDF).
     #[inline]
     pub fn sample(&self, t: Technique, u: f32) -> usize {

@@ -174,10 +174,11 @@ impl ImportanceCache {
         let j = self.records[l].sample(t, next());
         let mut d = VplDraw { vpl: j as u32, ..VplDraw::default() };
         let (mut h, mut c) = (Rgb::ZERO, Rgb::ZERO);
+        let rows = self.neighbour_pmfs(&nb, j);
         for (s, (l, w)) in nb.iter().enumerate() {
             let r = &self.records[l];
             for t in techniques.techniques() {
-                let (k, p) = (t as usize, r.pmf(t, j));
+                let (k, p) = (t as usize, rows[s][t as usize]);
                 d.pdf += w * alpha[s][k] * p;
                 // Only the learning sampler's feedback reads them.
                 if optimized {
@@ -195,6 +196,16 @@ impl ImportanceCache {
         plan.offset = c - h * d.weight;
         plan.learns = optimized;
         plan.push(d);
+    }
+
+    /// Every technique's pmf of VPL `j` at each neighbour slot.
+    #[inline]
+    fn neighbour_pmfs(&self, nb: &Neighbours, j: usize) -> [[f32; TECHNIQUES]; MAX_NEIGHBOURS] {
+        let mut rows = [[0.0f32; TECHNIQUES]; MAX_NEIGHBOURS];
+        for (row, (l, _)) in rows.iter_mut().zip(nb.iter()) {
+            *row = self.records[l].pmfs(j);
+        }
+        rows
     }
 
     /// Georgiev's multi-sample estimator: one draw per enabled distribution, kept where
@@ -218,9 +229,10 @@ impl ImportanceCache {
                 }
             }
             let j = self.records[l].sample(t, next());
+            let rows = self.neighbour_pmfs(&nb, j);
             let mut pmfs = [0.0f32; TECHNIQUES];
             for (i, &ti) in techniques.iter().enumerate() {
-                pmfs[i] = nb.iter().map(|(l, w)| w * self.records[l].pmf(ti, j)).sum();
+                pmfs[i] = nb.iter().enumerate().map(|(s, (_, w))| w * rows[s][ti as usize]).sum();
             }
             if alpha_max_owner(&pmfs[..m], confidences) == own && pmfs[own] > 0.0 {
                 let mut d = VplDraw { vpl: j as u32, weight: 1.0 / pmfs[own], ..VplDraw::default() };

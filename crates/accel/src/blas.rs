@@ -142,10 +142,10 @@ impl Blas {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `SceneAccel` builds 8-wide nodes only where AVX2 is available.
-            Blas::Bvh8(b) => unsafe { b.intersect8(o, d, t_min, t_max) },
+            Blas::Bvh8(b) => unsafe { avx2::intersect8(&b.nodes, &b.tris, o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as for `Bvh8`.
-            Blas::QBvh8(b) => unsafe { b.intersect8(o, d, t_min, t_max) },
+            Blas::QBvh8(b) => unsafe { avx2::intersect8(&b.nodes, &b.tris, o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `AVX2` queries run only where AVX2 is available.
             Blas::Flat(f) if AVX2 => unsafe { f.intersect8(o, d, t_min, t_max) },
@@ -160,10 +160,10 @@ impl Blas {
         match self {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as in `intersect`.
-            Blas::Bvh8(b) => unsafe { b.occluded8(o, d, t_min, t_max) },
+            Blas::Bvh8(b) => unsafe { avx2::occluded8(&b.nodes, &b.tris, o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as in `intersect`.
-            Blas::QBvh8(b) => unsafe { b.occluded8(o, d, t_min, t_max) },
+            Blas::QBvh8(b) => unsafe { avx2::occluded8(&b.nodes, &b.tris, o, d, t_min, t_max) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as in `intersect`.
             Blas::Flat(f) if AVX2 => unsafe { f.occluded8(o, d, t_min, t_max) },
@@ -418,42 +418,6 @@ impl WideBvh<4> {
             AnyPacket { packets: &self.tris.packets, ray: Ray4::new(WatertightRay::new(o, d), t_min) };
         let rb = RayBoxes::new(o, d);
         wide::traverse::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-impl WideBvh<8> {
-    /// Safety: the CPU has AVX2 and FMA (`Simd::Avx2.available()`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn intersect8(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        t_min: f32,
-        t_max: &mut f32,
-    ) -> Option<(f32, f32, f32, u32)> {
-        let wr = WatertightRay::new(o, d);
-        let mut leaves = avx2::ClosestPairs {
-            packets: &self.tris.packets,
-            prim_ids: &self.tris.prim_ids,
-            ray: avx2::Ray8::new(&wr, t_min),
-            best: None,
-        };
-        let rb = avx2::RayBoxes8::new(o, d);
-        avx2::traverse8::<_, true>(&self.nodes, &rb, t_min, t_max, &mut leaves);
-        leaves.best.map(|(t, u, v, i)| (t, u, v, self.tris.prim_ids[i]))
-    }
-
-    /// Safety: the CPU has AVX2 and FMA (`Simd::Avx2.available()`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
-        let wr = WatertightRay::new(o, d);
-        let mut t_max = t_max;
-        let leaves = avx2::AnyPairs { packets: &self.tris.packets, ray: avx2::Ray8::new(&wr, t_min) };
-        let rb = avx2::RayBoxes8::new(o, d);
-        avx2::traverse8::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
     }
 }
 

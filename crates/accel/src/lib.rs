@@ -99,6 +99,7 @@ mod packet;
 #[cfg(target_arch = "x86_64")]
 mod packet_two_level;
 mod presplit;
+mod query;
 mod qwide;
 #[cfg(target_arch = "x86_64")]
 mod qwide_avx2;
@@ -107,6 +108,7 @@ mod refit;
 pub mod sah;
 mod shared_origin;
 pub mod testmesh;
+mod top_level;
 mod tri4;
 pub mod triangle;
 mod wide;
@@ -121,7 +123,7 @@ use blas::Blas;
 use filtrace_core::{Aabb, Affine3A, Ray, Vec3};
 use filtrace_scene::Scene;
 use rayon::prelude::*;
-use wide::{Node4, RayBoxes};
+use wide::Node4;
 
 /// A ray-triangle hit: distance along the ray (in units of `|ray.dir|`), barycentrics of
 /// the hit (`p = (1-u-v) p0 + u p1 + v p2`), and which triangle of which instance.
@@ -398,25 +400,6 @@ impl SceneAccel {
         }
     }
 
-    /// The top-level record of `inst` (merged into `merged` or not).
-    fn instance_record(&self, inst: &filtrace_scene::Instance, merged: bool) -> InstanceRecord {
-        let blas = self.blas.get(inst.mesh as usize);
-        match (blas, invert_transform(&inst.transform)) {
-            (Some(b), Some((inv, identity))) if b.tri_count() > 0 && !merged => InstanceRecord {
-                mesh: inst.mesh,
-                world_to_object: inv,
-                identity,
-                bounds: b.bounds().transformed(&inst.transform),
-            },
-            _ => InstanceRecord {
-                mesh: inst.mesh,
-                world_to_object: Affine3A::IDENTITY,
-                identity: true,
-                bounds: Aabb::EMPTY,
-            },
-        }
-    }
-
     /// True when instance `i` was merged into world space at build time (it was not told
     /// to move, [`SceneAccel::build_with_moving`]; see `merge.rs`).
     pub fn is_merged(&self, i: u32) -> bool {
@@ -428,74 +411,6 @@ impl SceneAccel {
     pub(crate) fn merged_moved(&self, scene: &Scene, i: usize) -> bool {
         let now = scene.instances.get(i).map(|inst| inst.transform);
         self.merged_at.get(i).copied().flatten().is_some_and(|t| Some(t) != now)
-    }
-
-    fn build_top_level(&mut self, scene: &Scene) {
-        self.instances = scene
-            .instances
-            .iter()
-            .zip(&self.merged_at)
-            .map(|(inst, merged)| self.instance_record(inst, merged.is_some()))
-            .collect();
-        self.triangle_count = scene
-            .instances
-            .iter()
-            .map(|i| scene.meshes.get(i.mesh as usize).map_or(0, |m| m.triangle_count()))
-            .sum();
-        self.build_tlas();
-    }
-
-    /// Builds the top level over the hittable objects' current bounds.
-    fn build_tlas(&mut self) {
-        let mut objects: Vec<u32> = (0..self.instances.len() as u32)
-            .filter(|&i| !self.instances[i as usize].bounds.is_empty())
-            .collect();
-        if self.merged.tri_count() > 0 {
-            objects.push(MERGED);
-        }
-        let boxes: Vec<Aabb> = objects.iter().map(|&o| self.object_bounds(o)).collect();
-        let (root, order) = sah::build_binary(
-            &boxes,
-            &BuildParams { max_leaf_size: 2, leaf_block: 1, ..self.params.clone() },
-        );
-        self.tlas =
-            root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
-        self.tlas_order = order.iter().map(|&k| objects[k as usize]).collect();
-        self.order_tlas_for_any_hit();
-        self.single = (objects.len() == 1).then(|| objects[0]);
-        self.tlas_build_cost = refit::sah_cost(&self.tlas);
-    }
-
-    /// The any-hit order of the top level ([`child_order`]): a leaf's objects most
-    /// promising first (leaves test them in order), node slots most promising last.
-    fn order_tlas_for_any_hit(&mut self) {
-        let (mut tlas, mut order) = (std::mem::take(&mut self.tlas), std::mem::take(&mut self.tlas_order));
-        let (merged, meshes) = (self.merged.odds(), self.blas.iter().map(Blas::odds).collect::<Vec<_>>());
-        let object = |o: u32| {
-            let odds = if o == MERGED { merged } else { meshes[self.instances[o as usize].mesh as usize] };
-            (self.object_bounds(o).surface_area() as f64, odds)
-        };
-        for n in &tlas {
-            for s in (0..4).filter(|&s| n.count[s] > 0) {
-                let area = n.child_box(s).surface_area() as f64;
-                let key = |o: u32| child_order::Odds::of_objects(area, [object(o)]).priority();
-                let (first, count) = (n.child[s] as usize, n.count[s] as usize);
-                order[first..first + count].sort_by(|&a, &b| key(b).total_cmp(&key(a)));
-            }
-        }
-        child_order::order_for_any_hit(&mut tlas, |b, first, count| {
-            let objects = order[first as usize..(first + count) as usize].iter().map(|&o| object(o));
-            child_order::Odds::of_objects(b.surface_area() as f64, objects)
-        });
-        (self.tlas, self.tlas_order) = (tlas, order);
-    }
-
-    fn object_bounds(&self, object: u32) -> Aabb {
-        if object == MERGED {
-            self.merged.bounds()
-        } else {
-            self.instances[object as usize].bounds
-        }
     }
 
     /// Size and shape of the bottom levels, summed over meshes (for benchmarks and tuning).
@@ -521,139 +436,5 @@ impl SceneAccel {
     /// The kernels this BVH was built for.
     pub fn simd(&self) -> Simd {
         self.simd
-    }
-
-    /// Closest hit with `t` in `[ray.t_min, ray.t_max]`, or `None` (also for rays with
-    /// NaN/infinite components or a zero direction).
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        if !ray.is_valid() {
-            return None;
-        }
-        #[cfg(target_arch = "x86_64")]
-        if self.simd == Simd::Avx2 {
-            // SAFETY: `build_simd` keeps `Simd::Avx2` only where the CPU has AVX2 and FMA.
-            return unsafe { self.intersect_avx2(ray) };
-        }
-        self.intersect_with::<false>(ray)
-    }
-
-    /// The whole closest-hit query compiled for AVX2 (both levels inlined).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn intersect_avx2(&self, ray: &Ray) -> Option<Hit> {
-        self.intersect_with::<true>(ray)
-    }
-
-    #[inline(always)]
-    fn intersect_with<const AVX2: bool>(&self, ray: &Ray) -> Option<Hit> {
-        let mut t_max = ray.t_max;
-        if let Some(o) = self.single {
-            return self.intersect_object::<AVX2>(o, ray, &mut t_max);
-        }
-        let mut best = None;
-        let rb = RayBoxes::new(ray.origin, ray.dir);
-        wide::traverse::<_, true>(
-            &self.tlas,
-            &rb,
-            ray.t_min,
-            &mut t_max,
-            |first: u32, count: u32, t_max: &mut f32| {
-                for k in first..first + count {
-                    let object = self.tlas_order[k as usize];
-                    if let Some(h) = self.intersect_object::<AVX2>(object, ray, t_max) {
-                        let smaller =
-                            || best.is_some_and(|b: Hit| (h.instance, h.prim) < (b.instance, b.prim));
-                        if closer(h.t, best.map(|b| b.t), smaller) {
-                            best = Some(h);
-                        }
-                    }
-                }
-                false
-            },
-        );
-        best
-    }
-
-    /// True when anything is hit with `t` in `[ray.t_min, ray.t_max]` (false for invalid rays).
-    pub fn occluded(&self, ray: &Ray) -> bool {
-        if !ray.is_valid() {
-            return false;
-        }
-        #[cfg(target_arch = "x86_64")]
-        if self.simd == Simd::Avx2 {
-            // SAFETY: as in `intersect`.
-            return unsafe { self.occluded_avx2(ray) };
-        }
-        self.occluded_with::<false>(ray)
-    }
-
-    /// The whole any-hit query compiled for AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn occluded_avx2(&self, ray: &Ray) -> bool {
-        self.occluded_with::<true>(ray)
-    }
-
-    #[inline(always)]
-    fn occluded_with<const AVX2: bool>(&self, ray: &Ray) -> bool {
-        if let Some(o) = self.single {
-            return self.occluded_object::<AVX2>(o, ray);
-        }
-        let rb = RayBoxes::new(ray.origin, ray.dir);
-        let mut t_max = ray.t_max;
-        wide::traverse::<_, false>(
-            &self.tlas,
-            &rb,
-            ray.t_min,
-            &mut t_max,
-            |first: u32, count: u32, _: &mut f32| {
-                (first..first + count).any(|k| self.occluded_object::<AVX2>(self.tlas_order[k as usize], ray))
-            },
-        )
-    }
-
-    #[inline(always)]
-    fn intersect_object<const AVX2: bool>(&self, object: u32, ray: &Ray, t_max: &mut f32) -> Option<Hit> {
-        if object == MERGED {
-            let (t, u, v, k) = self.merged.intersect::<AVX2>(ray.origin, ray.dir, ray.t_min, t_max)?;
-            let (instance, prim) = self.merged_refs[k as usize];
-            return Some(Hit { t, u, v, instance, prim });
-        }
-        let inst = object;
-        let rec = &self.instances[inst as usize];
-        let (o, d) = object_ray(&rec.world_to_object, rec.identity, ray)?;
-        let (t, u, v, prim) = self.blas[rec.mesh as usize].intersect::<AVX2>(o, d, ray.t_min, t_max)?;
-        Some(Hit { t, u, v, instance: inst, prim })
-    }
-
-    #[inline(always)]
-    fn occluded_object<const AVX2: bool>(&self, object: u32, ray: &Ray) -> bool {
-        if object == MERGED {
-            return self.merged.occluded::<AVX2>(ray.origin, ray.dir, ray.t_min, ray.t_max);
-        }
-        let rec = &self.instances[object as usize];
-        object_ray(&rec.world_to_object, rec.identity, ray)
-            .is_some_and(|(o, d)| self.blas[rec.mesh as usize].occluded::<AVX2>(o, d, ray.t_min, ray.t_max))
-    }
-
-    /// Checks the BVH invariants of both levels (every primitive in exactly one leaf,
-    /// child boxes inside their parents). Debug builds run it after every build.
-    pub fn validate(&self) -> Result<(), String> {
-        for (m, b) in self.blas.iter().enumerate() {
-            b.validate().map_err(|e| format!("mesh {m}: {e}"))?;
-        }
-        self.merged.validate().map_err(|e| format!("merged instances: {e}"))?;
-        self.validate_top_level()
-    }
-
-    /// The top-level part of [`SceneAccel::validate`] (cheap: run after every update).
-    fn validate_top_level(&self) -> Result<(), String> {
-        let live = self.instances.iter().filter(|r| !r.bounds.is_empty()).count()
-            + (self.merged.tri_count() > 0) as usize;
-        if self.tlas_order.len() != live {
-            return Err(format!("top level holds {} objects, {live} are hittable", self.tlas_order.len()));
-        }
-        wide::validate(&self.tlas, self.tlas_order.len(), |k| self.object_bounds(self.tlas_order[k]))
-            .map_err(|e| format!("top level: {e}"))
     }
 }

@@ -1,4 +1,5 @@
-//! Closest-hit and any-hit traversal of compressed 8-wide nodes ([`QNode8`]) with AVX2.
+//! The AVX2 slab test of compressed 8-wide nodes ([`QNode8`]), the node layout that the
+//! traversal loop of the uncompressed nodes (`avx2::traverse8`) also runs over.
 //!
 //! Each plane of the slab test first decodes its eight grid values to floats, one
 //! `vpmovzxbd` (8 bytes to 8 integers), one `vcvtdq2ps` and one fused multiply-add
@@ -10,14 +11,10 @@
 //!
 //! Every function here needs AVX2 and FMA (see `avx2.rs` for the inlining scheme).
 
-use crate::avx2::{push_sorted8, AnyPairs, Children8, ClosestPairs, Ray8, RayBoxes8};
-use crate::qwide::{QBvh8, QNode8};
-use crate::sah::MAX_DEPTH;
-use crate::triangle::WatertightRay;
-use crate::wide::{cull_bound, prefetch, push_children, Entry, Leaves, FAR_SCALE};
-use filtrace_core::Vec3;
+use crate::avx2::{Node8Layout, RayBoxes8};
+use crate::qwide::QNode8;
+use crate::wide::{cull_bound, FAR_SCALE};
 use std::arch::x86_64::*;
-use std::mem::MaybeUninit;
 
 /// The eight decoded bounds of grid row `row` (byte offset `8 row`, as the float row
 /// offsets of [`RayBoxes8`] for the 8-float rows of `Node8`) on axis `k`.
@@ -53,149 +50,20 @@ pub(crate) unsafe fn qbox8(n: &QNode8, r: &RayBoxes8, t_min: __m256, t_max: f32)
     (mask & n.valid, t_near)
 }
 
-impl Children8 for QNode8 {
+/// The compressed layout of the traversal loop (`avx2::traverse8`): the decoded box test,
+/// and leaf counts widened from bytes.
+impl Node8Layout for QNode8 {
+    const LINES: usize = 2;
+
     #[inline(always)]
-    fn entry(&self, i: usize, t: f32) -> Entry {
-        Entry { child: self.child[i], count: self.count[i] as u32, t }
-    }
-}
-
-/// Eight 32-byte aligned floats.
-#[repr(C, align(32))]
-struct Lanes8([f32; 8]);
-
-/// Traversal stack depth: each 8-wide level pushes at most seven entries.
-const STACK8: usize = 7 * MAX_DEPTH + 8;
-
-/// Visits every leaf whose decoded box the ray `[t_min, *t_max]` touches, as
-/// `avx2::traverse8` does for uncompressed nodes: near-first for closest hits (`ORDERED`),
-/// from the last slot down for any hits; returns `true` when a visit asked to stop.
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-pub(crate) fn traverse_q8<L: Leaves, const ORDERED: bool>(
-    nodes: &[QNode8],
-    r: &RayBoxes8,
-    t_min: f32,
-    t_max: &mut f32,
-    mut leaves: L,
-) -> bool {
-    if nodes.is_empty() {
-        return false;
-    }
-    let t_min8 = _mm256_set1_ps(t_min);
-    let mut stack = [MaybeUninit::<Entry>::uninit(); STACK8];
-    let mut sp = 0usize;
-    let mut cur = Entry { child: 0, count: 0, t: t_min };
-    let mut t_near = Lanes8([0.0; 8]);
-    loop {
-        if cur.count == 0 {
-            debug_assert!((cur.child as usize) < nodes.len());
-            // SAFETY: child indices of a built tree are in range (`qwide::validate`).
-            let node = unsafe { nodes.get_unchecked(cur.child as usize) };
-            // SAFETY: this function runs with AVX2 and FMA.
-            let (mask, tn) = unsafe { qbox8(node, r, t_min8, *t_max) };
-            if mask != 0 {
-                // SAFETY: `Lanes8` is 32-byte aligned.
-                unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
-                let e = |i: usize| node.entry(i, t_near.0[i]);
-                // Fetch every child to be visited, without a branch on node or leaf (as
-                // `traverse8`): the two lines of a node, or the up to six lines of a
-                // two-packet leaf.
-                let mut bits = mask;
-                while bits != 0 {
-                    let i = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let (c, n) = (node.child[i], node.count[i]);
-                    let inner = nodes.as_ptr().wrapping_add(c as usize) as usize;
-                    let leaf = leaves.leaf_addr(c) & !63;
-                    let p = if n == 0 { inner } else { leaf };
-                    let rest = if n == 0 { p } else { p + 256 };
-                    let second = if n == 0 { p } else { p + 128 };
-                    prefetch(p as *const u8, 2);
-                    prefetch(second as *const u8, 2);
-                    prefetch(rest as *const u8, 2);
-                }
-                // Closest hits: three or more children by the sorting network of `traverse8`.
-                cur = if ORDERED && mask.count_ones() >= 3 {
-                    // SAFETY: AVX2; at most 8 entries pushed, `STACK8` has room.
-                    unsafe { push_sorted8(mask, tn, node, &mut stack, &mut sp) }
-                } else {
-                    push_children::<ORDERED>(mask, e, &mut stack, &mut sp)
-                };
-                continue;
-            }
-        } else if ORDERED {
-            // Closest hits: the leaf test out of line (as `traverse8`).
-            // SAFETY: AVX2 (this function's target features).
-            unsafe {
-                std::hint::black_box(visit_leaf::<L> as VisitLeaf<L>)(
-                    &mut leaves,
-                    cur.child,
-                    cur.count,
-                    t_max,
-                )
-            };
-        } else if leaves.visit(cur.child, cur.count, t_max) {
-            return true;
-        }
-        // Pop the nearest pending entry that can still hold a closer hit.
-        loop {
-            if sp == 0 {
-                return false;
-            }
-            sp -= 1;
-            // SAFETY: entries below `sp` were written before `sp` was raised past them.
-            let e = unsafe { stack.get_unchecked(sp).assume_init() };
-            if e.t <= cull_bound(*t_max) {
-                cur = e;
-                break;
-            }
-        }
-    }
-}
-
-/// `leaves.visit` out of line for closest hits (see `avx2::visit_leaf`).
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-fn visit_leaf<L: Leaves>(leaves: &mut L, first: u32, count: u32, t_max: &mut f32) -> bool {
-    leaves.visit(first, count, t_max)
-}
-
-type VisitLeaf<L> = unsafe fn(&mut L, u32, u32, &mut f32) -> bool;
-
-impl QBvh8 {
-    /// Closest hit `(t, u, v, prim)` with `t` in `[t_min, *t_max]`, shortening `*t_max`.
-    /// Safety: the CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(crate) unsafe fn intersect8(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        t_min: f32,
-        t_max: &mut f32,
-    ) -> Option<(f32, f32, f32, u32)> {
-        let wr = WatertightRay::new(o, d);
-        let mut leaves = ClosestPairs {
-            packets: &self.tris.packets,
-            prim_ids: &self.tris.prim_ids,
-            ray: Ray8::new(&wr, t_min),
-            best: None,
-        };
-        let rb = RayBoxes8::new(o, d);
-        traverse_q8::<_, true>(&self.nodes, &rb, t_min, t_max, &mut leaves);
-        leaves.best.map(|(t, u, v, i)| (t, u, v, self.tris.prim_ids[i]))
+    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+        // SAFETY: AVX2 and FMA (the caller's).
+        unsafe { qbox8(self, r, t_min, t_max) }
     }
 
-    /// Whether anything is hit with `t` in `[t_min, t_max]`. Safety: AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(crate) unsafe fn occluded8(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> bool {
-        let wr = WatertightRay::new(o, d);
-        let mut t_max = t_max;
-        let leaves = AnyPairs { packets: &self.tris.packets, ray: Ray8::new(&wr, t_min) };
-        let rb = RayBoxes8::new(o, d);
-        traverse_q8::<_, false>(&self.nodes, &rb, t_min, &mut t_max, leaves)
+    #[inline(always)]
+    fn child(&self, i: usize) -> (u32, u32) {
+        (self.child[i], self.count[i] as u32)
     }
 }
 
@@ -205,7 +73,7 @@ mod tests {
     use crate::avx2::box8;
     use crate::testmesh::SplitMix64;
     use crate::wide::Node8;
-    use filtrace_core::Aabb;
+    use filtrace_core::{Aabb, Vec3};
 
     /// The compressed test keeps every box the uncompressed test keeps (its boxes contain
     /// the exact ones), on rays grazing random boxes: origins on faces, directions aimed at

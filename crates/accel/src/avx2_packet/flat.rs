@@ -5,10 +5,9 @@
 //! arithmetic shared with the BVH packet kernels (ray setup, watertight test, running
 //! closest hits) and for why each lane's answer equals the single-ray query's.
 
-use super::{
-    any_scalar, cull8, edges, lane_mask, ld, setup, shear, slab, test_sheared, Best8, Closest8, Regs, I8,
-    NO_HIT,
-};
+use super::boxes::{cull8, LaneBoxes};
+use super::lanes::{lane_mask, setup, Best8, Closest8, Regs, I8, NO_HIT};
+use super::tri::{any_scalar, edges, shear, test_sheared};
 use crate::avx2::{any_zero, hit_distance, mixed_signs};
 use crate::flat_blas::{FlatBlas, FlatGroup, FlatNode, FlatTri, VertRow, MAX_FLAT_VERTS, SHEARED_VERT_BYTES};
 use crate::ray_packet::{RayPacket, LANES};
@@ -56,50 +55,6 @@ unsafe fn corner_row<const UNIFORM: bool>(row: &VertRow, r: &Regs<'_>, k: [usize
     ]
 }
 
-/// Per-lane constants of the fused box test of 8 rays against one box, lane for lane
-/// those of `avx2::RayBoxes8::new` (the BVH's conservative slab test: `b * inv - (o * inv
-/// +- e)`); unlike [`Boxes8`](super::Boxes8) each lane picks its own near and far planes, so the rays
-/// need not share direction signs.
-struct LaneBoxes {
-    inv: [__m256; 3],
-    oinv_near: [__m256; 3],
-    oinv_far: [__m256; 3],
-    /// All ones where `inv < 0` (the near plane is the box's max).
-    neg: [__m256; 3],
-}
-
-impl LaneBoxes {
-    #[inline(always)]
-    unsafe fn new(rays: &RayPacket) -> Self {
-        let zero = _mm256_setzero_ps();
-        let mut b = Self { inv: [zero; 3], oinv_near: [zero; 3], oinv_far: [zero; 3], neg: [zero; 3] };
-        for k in 0..3 {
-            let inv;
-            (inv, b.oinv_near[k], b.oinv_far[k]) = slab(ld(&rays.origin[k]), ld(&rays.dir[k]));
-            b.inv[k] = inv;
-            b.neg[k] = _mm256_cmp_ps::<_CMP_LT_OQ>(inv, zero);
-        }
-        b
-    }
-
-    /// Lanes of `lanes` whose rays touch `bounds` (`[min x, y, z, max x, y, z, ..]`) with
-    /// `t` in `[t_min, t_cull]`.
-    #[inline(always)]
-    unsafe fn touch(&self, bounds: &[f32; 8], t_min: __m256, t_cull: __m256, lanes: __m256) -> u32 {
-        let mut t_near = t_min;
-        let mut t_far = t_cull;
-        for k in 0..3 {
-            let (lo, hi) = (_mm256_set1_ps(bounds[k]), _mm256_set1_ps(bounds[k + 3]));
-            let n = _mm256_fmsub_ps(_mm256_blendv_ps(lo, hi, self.neg[k]), self.inv[k], self.oinv_near[k]);
-            let f = _mm256_fmsub_ps(_mm256_blendv_ps(hi, lo, self.neg[k]), self.inv[k], self.oinv_far[k]);
-            t_near = _mm256_max_ps(n, t_near);
-            t_far = _mm256_min_ps(f, t_far);
-        }
-        let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
-        _mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far), lanes)) as u32
-    }
-}
-
 /// Bit `g` set for each group of `groups` whose box some lane of `act` touches with `t`
 /// in `[t_min, t_cull]`. Branch-free: all boxes are tested before any triangle (a branch
 /// per group on incoherent packets is a coin flip).
@@ -113,7 +68,9 @@ unsafe fn touched_groups(
 ) -> u32 {
     let mut mask = 0u32;
     for (g, group) in groups.iter().enumerate() {
-        mask |= ((lb.touch(&group.bounds, t_min, t_cull, act) != 0) as u32) << g;
+        let b = &group.bounds;
+        let (lanes, _) = lb.touch([b[0], b[1], b[2]], [b[3], b[4], b[5]], t_min, t_cull, act);
+        mask |= ((lanes != 0) as u32) << g;
     }
     mask
 }

@@ -246,6 +246,15 @@ impl Builder<'_> {
         SceneError::parse(self.path, Some(line_of(self.src, span)), msg)
     }
 
+    /// Errors when `name` already names an object, a light or the camera: animation tracks
+    /// address them by name.
+    fn check_name_is_new(&self, span: &Range<usize>, name: &str) -> Result<(), SceneError> {
+        if self.anim_objects.contains_key(name) || self.anim_lights.contains_key(name) || name == "camera" {
+            return Err(self.err(span.clone(), format!("the name '{name}' is used twice")));
+        }
+        Ok(())
+    }
+
     fn camera(&self, c: &CameraDef) -> Result<Camera, SceneError> {
         let cam = Camera {
             eye: Vec3::from(c.eye),

@@ -67,9 +67,7 @@ impl Builder<'_> {
         first: (usize, usize),
     ) -> Result<(), SceneError> {
         let Some(name) = name else { return Ok(()) };
-        if self.anim_objects.contains_key(name) || self.anim_lights.contains_key(name) || name == "camera" {
-            return Err(self.err(span.clone(), format!("the name '{name}' is used twice")));
-        }
+        self.check_name_is_new(span, name)?;
         let to_object = transform.inverse();
         let instances = (first.0..self.scene.instances.len())
             .map(|i| (i as u32, to_object * self.scene.instances[i].transform))

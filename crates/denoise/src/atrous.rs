@@ -13,7 +13,7 @@
 //! samples per pixel. Any subset of the three weights may be switched off (0 weights is the
 //! plain À-Trous transform), which reproduces the paper's Table 2 and Figure 4.
 
-use crate::error::{invalid, DenoiseError};
+use crate::error::{invalid, require_positive_sigmas, DenoiseError};
 use crate::gbuffer::{check_color, from_planes_strided, to_planes_valid, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
@@ -83,18 +83,7 @@ impl AtrousParams {
         if !(1..=10).contains(&self.iterations) {
             return Err(invalid("iterations", format!("must be 1..=10, got {}", self.iterations)));
         }
-        for (name, s) in [
-            ("sigma_color", self.sigma_color),
-            ("sigma_normal", self.sigma_normal),
-            ("sigma_position", self.sigma_position),
-        ] {
-            if let Some(s) = s {
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(invalid(name, format!("must be finite and > 0, got {s}")));
-                }
-            }
-        }
-        Ok(())
+        require_positive_sigmas(self.sigma_color, self.sigma_normal, self.sigma_position)
     }
 }
 

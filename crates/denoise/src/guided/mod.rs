@@ -38,7 +38,7 @@
 //! radius 24-32, eps 0.01 for normals and 0.01-0.03 for depth). Edges that the guidance does
 //! not show (shadows, texture) are smoothed away: filter demodulated illumination.
 
-use crate::error::{invalid, DenoiseError};
+use crate::error::{invalid, require_positive, DenoiseError};
 use crate::gbuffer::{check_color, GBuffer};
 use crate::pool::Buf;
 use crate::simd::Isa;
@@ -117,12 +117,8 @@ impl GuidedParams {
         if self.radius == 0 {
             return Err(invalid("radius", "must be >= 1"));
         }
-        for (name, e) in [("eps_normal", self.eps_normal), ("eps_depth", self.eps_depth)] {
-            if !(e.is_finite() && e > 0.0) {
-                return Err(invalid(name, format!("must be finite and > 0, got {e}")));
-            }
-        }
-        Ok(())
+        require_positive("eps_normal", self.eps_normal)?;
+        require_positive("eps_depth", self.eps_depth)
     }
 }
 

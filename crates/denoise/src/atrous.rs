@@ -178,8 +178,7 @@ pub fn atrous_into(
 /// Row stride of the planes the levels run on: a multiple of 16 values (64-byte rows)
 /// that is an odd number of cache lines, so that rows `step`, `2 step` apart fall into
 /// different L1 sets. With `stride = width = 1920` (30 KB per 4 rows) rows 8 and 16 apart
-/// are 4 KB-aliased: the step-8 and step-16 levels ran 1.3x slower than at width 1936
-/// (bench filters-like input, 1 thread).
+/// are 4 KB-aliased, which slows the step-8 and step-16 levels (docs/perf-filters.md).
 fn level_stride(width: usize) -> usize {
     let s = width.div_ceil(16) * 16;
     if (s / 16) & 1 == 0 {

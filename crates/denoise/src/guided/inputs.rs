@@ -102,8 +102,9 @@ struct Src<'a> {
 fn convert_row<const D: usize>(st: &Strips, src: &Src, y: usize, out: &mut [V]) {
     let (w, len) = (st.w, st.len);
     for j in 0..len {
-        let mut v = [[0.0f32; S]; 9]; // D + 5 <= 9 planes
-                                      // One lane per segment; lanes past the image's end stay 0 (background, no fit).
+        // D + 5 <= 9 planes. One lane per segment; lanes past the image's end stay 0
+        // (background, no fit).
+        let mut v = [[0.0f32; S]; 9];
         for l in 0..st.lanes_in_image(j) {
             let i = y * w + l * len + j;
             let px = &src.n[3 * i..3 * i + 3];

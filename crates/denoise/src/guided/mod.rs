@@ -23,8 +23,9 @@
 //!
 //! Bounded output. The linear model is not a convex combination: `q` may leave the range of
 //! the noisy values it was fitted to (overshoot at guide edges, He et al. 2010 §3.4 "gradient
-//! reversal" discussion), and a covariance system spoilt by rounding (huge guide values
-//! before background depths were detected: `-1e6` on a Cycles frame) made it explode. So:
+//! reversal" discussion), and a covariance system spoilt by rounding (huge guide values,
+//! such as undetected background depths: docs/perf-filters.md, Cycles frames) can make it
+//! explode. So:
 //! - the depth guide is the depth over its scale clamped to `[0, DEPTH_GUIDE_MAX]`;
 //! - a window whose Cholesky pivot falls below `eps / 2` (impossible in exact arithmetic:
 //!   every pivot of `Sigma + eps U` with `Sigma` positive semi-definite is at least its

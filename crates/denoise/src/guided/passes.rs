@@ -45,7 +45,7 @@ impl<const D: usize> Px<D> {
 impl<const D: usize, const K1: usize> StripPass<K1> for Pass1<'_, D> {
     /// Adds / subtracts `m, m I, m I I^T, m p, m I p` of 16 pixels, in the order of [`super::k1`].
     /// (Written out without closures: a closure per quantity was compiled out of line,
-    /// without the AVX-512 features, 1.6x slower.) A missing row is taken as zeros:
+    /// without the AVX-512 features.) A missing row is taken as zeros:
     /// `(c + q) - 0 = c + q` and `(c + 0) - q = c - q` exactly.
     #[inline(always)]
     fn update(&self, j: usize, y_add: Option<usize>, y_sub: Option<usize>, col: &mut [V; K1]) {

@@ -17,7 +17,8 @@ pub(super) fn solve_lanes<const D: usize, const K1: usize>(
 ) {
     let kp = 1 + D + D * (D + 1) / 2; // index of m p
     let kc = kp + 3; // index of m I p
-                     // `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
+
+    // `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
     let fms = |c: V, a: V, b: V| -> V { vsub(c, vmul(a, b)) };
     let n = s[0];
     let inv: V = n.map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });

@@ -304,8 +304,8 @@ fn underflowing_weight_sums_stay_finite() {
 /// Cycles' AOVs: depth `1e10` where rays escape, also on edge pixels whose normal is set.
 /// Those pixels are background, the depth scale comes from the surfaces (not 1e10), and the
 /// guided filter's output stays finite and inside the input's range, with the scale
-/// estimated and with Blender's explicit scene scale (before the fix: 1.4e10 here, -1e6 on
-/// the Cycles frame).
+/// estimated and with Blender's explicit scene scale (docs/reliability.md: the values the
+/// unbounded filter gave).
 #[test]
 fn cycles_escaped_ray_depth_is_background_and_outputs_stay_in_range() {
     // A sphere (with its ring of edge pixels) above a floor that starts a window's height

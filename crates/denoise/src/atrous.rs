@@ -13,7 +13,7 @@
 //! samples per pixel. Any subset of the three weights may be switched off (0 weights is the
 //! plain À-Trous transform), which reproduces the paper's Table 2 and Figure 4.
 
-use crate::error::{invalid, DenoiseError};
+use crate::error::{invalid, require_positive_sigmas, DenoiseError};
 use crate::gbuffer::{check_color, from_planes_strided, to_planes_valid, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
@@ -83,18 +83,7 @@ impl AtrousParams {
         if !(1..=10).contains(&self.iterations) {
             return Err(invalid("iterations", format!("must be 1..=10, got {}", self.iterations)));
         }
-        for (name, s) in [
-            ("sigma_color", self.sigma_color),
-            ("sigma_normal", self.sigma_normal),
-            ("sigma_position", self.sigma_position),
-        ] {
-            if let Some(s) = s {
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(invalid(name, format!("must be finite and > 0, got {s}")));
-                }
-            }
-        }
-        Ok(())
+        require_positive_sigmas(self.sigma_color, self.sigma_normal, self.sigma_position)
     }
 }
 
@@ -189,8 +178,7 @@ pub fn atrous_into(
 /// Row stride of the planes the levels run on: a multiple of 16 values (64-byte rows)
 /// that is an odd number of cache lines, so that rows `step`, `2 step` apart fall into
 /// different L1 sets. With `stride = width = 1920` (30 KB per 4 rows) rows 8 and 16 apart
-/// are 4 KB-aliased: the step-8 and step-16 levels ran 1.3x slower than at width 1936
-/// (bench filters-like input, 1 thread).
+/// are 4 KB-aliased, which slows the step-8 and step-16 levels (docs/perf-filters.md).
 fn level_stride(width: usize) -> usize {
     let s = width.div_ceil(16) * 16;
     if (s / 16) & 1 == 0 {

@@ -6,7 +6,7 @@
 //! the À-Trous filter (without the step-width scaling). Cost `O(r^2)` per pixel: a reference
 //! to judge the fast filters against, not an interactive filter.
 
-use crate::error::{invalid, DenoiseError};
+use crate::error::{invalid, require_positive, require_positive_sigmas, DenoiseError};
 use crate::gbuffer::{check_color, from_planes, to_planes, GBuffer, Guides, Planes3};
 use crate::kernel::{edge_avoiding_pass, RangeTerms, Tap};
 use crate::pool::Buf;
@@ -60,24 +60,8 @@ impl BilateralParams {
         if !(1..=64).contains(&self.radius) {
             return Err(invalid("radius", format!("must be 1..=64, got {}", self.radius)));
         }
-        if !(self.sigma_spatial.is_finite() && self.sigma_spatial > 0.0) {
-            return Err(invalid(
-                "sigma_spatial",
-                format!("must be finite and > 0, got {}", self.sigma_spatial),
-            ));
-        }
-        for (name, s) in [
-            ("sigma_color", self.sigma_color),
-            ("sigma_normal", self.sigma_normal),
-            ("sigma_position", self.sigma_position),
-        ] {
-            if let Some(s) = s {
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(invalid(name, format!("must be finite and > 0, got {s}")));
-                }
-            }
-        }
-        Ok(())
+        require_positive("sigma_spatial", self.sigma_spatial)?;
+        require_positive_sigmas(self.sigma_color, self.sigma_normal, self.sigma_position)
     }
 }
 

@@ -3,10 +3,10 @@
 //!
 //! Taps of a level connect only rows `step` apart, so every chain is independent of the
 //! others, and a segment of a chain needs two rows of start-up (the weight rows of the two
-//! chain rows before it). Bands of consecutive rows cost `2 step` start-up rows each and had
+//! chain rows before it). Bands of consecutive rows cost `2 step` start-up rows each and have
 //! to be at least `8 step` rows high to keep that share small, so the coarse levels
-//! (step 8, 16) ran as 8-16 bands with a quarter of extra weight rows: the filter scaled
-//! 6.7x on 16 cores at 1080p. Chain segments cost two rows at every step width, and there are
+//! (step 8, 16) would run as 8-16 bands with a quarter of extra weight rows, too few for
+//! many cores (docs/perf-filters.md). Chain segments cost two rows at every step width, and there are
 //! as many as the threads need. Every pixel's result is independent of the split.
 
 /// A segment of a chain: output rows `first, first + step, ...`, `rows` of them.

@@ -5,7 +5,7 @@
 //! The same `max(albedo, eps)` is used both ways, so demodulation followed by remodulation
 //! returns the input exactly (up to rounding) for any albedo, black included.
 
-use crate::error::{invalid, DenoiseError};
+use crate::error::{require_positive, DenoiseError};
 use filtrace_core::Image;
 
 /// Default `eps`: albedos below 1% are clamped (keeps black surfaces from blowing up).
@@ -25,10 +25,7 @@ fn check(color: &Image, albedo: &Image, eps: f32) -> Result<(), DenoiseError> {
             found: (albedo.width(), albedo.height()),
         });
     }
-    if !(eps.is_finite() && eps > 0.0) {
-        return Err(invalid("albedo_eps", format!("must be finite and > 0, got {eps}")));
-    }
-    Ok(())
+    require_positive("albedo_eps", eps)
 }
 
 /// The divisor for one albedo value; non-finite albedo counts as `eps`... as 1 (no change).

@@ -39,3 +39,28 @@ impl std::error::Error for DenoiseError {}
 pub(crate) fn invalid(name: &'static str, reason: impl Into<String>) -> DenoiseError {
     DenoiseError::InvalidParameter { name, reason: reason.into() }
 }
+
+/// Errors unless `v` is finite and > 0 (a sigma, eps or scale that is 0, negative or NaN
+/// would divide by zero or weigh nothing).
+pub(crate) fn require_positive(name: &'static str, v: f32) -> Result<(), DenoiseError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(name, format!("must be finite and > 0, got {v}")))
+    }
+}
+
+/// The edge-stopping sigmas of the À-Trous and bilateral filters: each off (`None`) or
+/// finite and > 0.
+pub(crate) fn require_positive_sigmas(
+    color: Option<f32>,
+    normal: Option<f32>,
+    position: Option<f32>,
+) -> Result<(), DenoiseError> {
+    for (name, s) in [("sigma_color", color), ("sigma_normal", normal), ("sigma_position", position)] {
+        if let Some(s) = s {
+            require_positive(name, s)?;
+        }
+    }
+    Ok(())
+}

@@ -84,12 +84,10 @@ impl GBuffer {
         if let Some(a) = &self.albedo {
             check("albedo", a, 3, "3")?;
         }
-        if let Some(s) = self.scene_scale {
-            if !(s.is_finite() && s > 0.0) {
-                return Err(crate::error::invalid("scene_scale", format!("must be finite and > 0, got {s}")));
-            }
+        match self.scene_scale {
+            Some(s) => crate::error::require_positive("scene_scale", s),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// Number of background pixels (zero-length or non-finite normal).

@@ -351,8 +351,8 @@ fn blocks_any(
 }
 
 /// Pixels per tile of a row: the tile's centre values (10 planes) and accumulators (4) stay
-/// in L1 while the 25 (or `(2r+1)^2`) taps stream over it. 256 chosen: whole 1920-pixel rows
-/// (77 KB of centre values) spilled to L2 and ran 1.6x slower (bench filters, 1080p).
+/// in L1 while the 25 (or `(2r+1)^2`) taps stream over it; whole 1920-pixel rows (77 KB of
+/// centre values) spill to L2 (docs/perf-filters.md).
 const TILE: usize = 256;
 
 /// One edge-avoiding pass `src -> dst` over all rows (in parallel).

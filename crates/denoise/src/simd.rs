@@ -62,9 +62,8 @@ pub fn exp_neg_g<const F: bool>(x: f32) -> f32 {
 ///
 /// Values below [`SCALED_EXP_MIN_LOG2`] (`2^-100`, about 8e-31) are exactly 0: a weight
 /// that small changes no normalised sum, and flushing it keeps the products `w c` out of
-/// the subnormal range, whose arithmetic is microcoded and slow (before this flush, the
-/// coarse À-Trous levels, where `w_rt`'s exponent is large, ran 1.5x slower than the fine
-/// ones: bench filters, 1080p).
+/// the subnormal range, whose arithmetic is microcoded and slow (the coarse À-Trous levels,
+/// where `w_rt`'s exponent is large, would hit it: docs/perf-filters.md).
 #[inline(always)]
 // `!(t >= min)` on purpose: one comparison that is also true for NaN.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -8,10 +8,9 @@
 //! vectors per row). A vector holds 16 pixels of the same row `len` apart, so every step of
 //! the running sums *and* of the per-window work after them (the guided filter's 4x4
 //! solves) is one vector operation across 16 windows, with no transposition between "one
-//! pixel's quantities" and "one quantity of many pixels" (the previous layout kept the `K`
-//! quantities of a pixel contiguous: the running sums were vector operations over `K`, but
-//! the products entering them and the solves after them were per pixel: 3x the CPU time at
-//! 1080p).
+//! pixel's quantities" and "one quantity of many pixels" (with the `K` quantities of a pixel
+//! contiguous, only the running sums are vector operations: the products entering them and
+//! the solves after them are per pixel; docs/perf-filters.md).
 //!
 //! # Running sums
 //! For `K` quantities at once, per band of rows, column sums are updated by adding the row
@@ -37,7 +36,7 @@
 //! operations in the same order as [`band`], positions split across tasks), then the
 //! sub-bands run in parallel from those states. The results are bit-identical to whole bands;
 //! the replay costs one more pass of vertical updates, paid only when the threads outnumber
-//! the bands (1080p at r = 32 has 4 bands: 3.7x on 16 cores before).
+//! the bands (1080p at r = 32 has only 4 bands).
 
 use crate::simd::Isa;
 use rayon::prelude::*;
@@ -126,7 +125,7 @@ pub(crate) trait StripPass<const K: usize>: Sync {
 
 // The `[V; K]` operations below run over the flattened `K * S` values: one contiguous loop
 // that the compiler vectorises with plain loads and stores. Nested loops over `k` and the
-// lanes were vectorised across `k`, with gathers and scatters (2.5x slower).
+// lanes are vectorised across `k`, with gathers and scatters.
 
 /// `a + b` lane by lane.
 #[inline(always)]

@@ -437,8 +437,7 @@ pub(crate) enum BandOut<'a> {
 /// One segment of a chain ([`crate::chains`]): output rows `first, first + step, ...`, weight
 /// rows from two chain rows before `first` on (the ring's start-up). Walking a chain on its
 /// own keeps the ring at 3 rows with the chain's next rows still in the cache (walking all
-/// rows in order needs `2 step + 1` ring rows, which fell out of L2 at the coarse levels:
-/// 1.4x slower at step 16).
+/// rows in order needs `2 step + 1` ring rows, which fall out of L2 at the coarse levels).
 #[inline(always)]
 fn segment<
     const WC: bool,

@@ -6,7 +6,7 @@
 
 pub mod metrics;
 
-// Experiments and their reports (pipeline/evaluation engineer).
+// Experiments and their reports.
 pub mod experiment;
 pub mod figures;
 pub mod oidn;

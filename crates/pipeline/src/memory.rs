@@ -46,8 +46,8 @@ pub fn frame_bytes(st: &PipelineSettings, batch_size: Option<usize>, sample_chun
 
 /// The scratch of filter `name` (`none`, `atrous`, `guided`, `bilateral`) on a `w x h`
 /// frame: f32 values per pixel plus a fixed part (measured peaks, `tests/memory.rs`; the
-/// guided filter's fixed part is its strip buffers and, since the sub-bands of issue 13, the
-/// replayed column sums and the pool's right-sized buffers; 2 threads).
+/// guided filter's fixed part is its strip buffers, the replayed column sums of its
+/// sub-bands and the pool's right-sized buffers; 2 threads).
 pub fn filter_bytes(name: &str, w: u32, h: u32) -> u64 {
     let (values_per_pixel, fixed) = match name {
         "none" => (0, 0),

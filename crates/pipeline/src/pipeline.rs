@@ -21,8 +21,8 @@
 //! Passes 3 and 4 run in passes of sample indices (1, 1, 2, 4, ... up to
 //! [`SAMPLE_PASS_MAX`] further samples per pixel), and each pass over chunks of at most
 //! [`SAMPLE_CHUNK`] samples whose values are added to per-pixel sums in the frame's layers,
-//! so that memory is O(pixels) whatever the spp (a record per sample was 52 bytes per
-//! sample: 56 GB at 512x512 and 4096 spp). The sums see the same additions in the same
+//! so that memory is O(pixels) whatever the spp (a record of 52 bytes per sample would
+//! take 56 GB at 512x512 and 4096 spp). The sums see the same additions in the same
 //! order for any chunk size.
 //!
 //! Cancellation ([`FilteredRenderer::set_cancel`]): the flag is polled per row of the guide

@@ -148,8 +148,30 @@ impl<'a> Body<'a> {
 
 /// Parses PLY bytes; `path` names the file in errors.
 pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
+    let header = parse_header(bytes, path)?;
+    let mut body = Body {
+        format: header.format,
+        data: bytes,
+        pos: header.pos,
+        line: header.lines,
+        tokens: Vec::new().into_iter(),
+    };
+    let data = read_elements(&mut body, &header, path)?;
+    build_scene(data, path)
+}
+
+/// The header: format, elements with their properties, where the body starts (byte) and
+/// how many lines the header has.
+struct Header {
+    format: Format,
+    elements: Vec<Element>,
+    pos: usize,
+    lines: usize,
+}
+
+/// Reads the ASCII header lines up to `end_header`.
+fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneError> {
     let err = |line: Option<usize>, m: String| SceneError::parse(path, line, m);
-    // Header: ASCII lines up to `end_header`.
     let mut pos = 0;
     let mut line_no = 0;
     let mut format = None;
@@ -190,30 +212,49 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                 let Some(el) = elements.last_mut() else {
                     return Err(err(Some(line_no), "property before any element".into()));
                 };
-                let bad = || err(Some(line_no), format!("bad property line '{text}'"));
-                let prop = if toks.get(1) == Some(&"list") {
-                    let count = toks.get(2).and_then(|t| Scalar::parse(t)).ok_or_else(bad)?;
-                    let item = toks.get(3).and_then(|t| Scalar::parse(t)).ok_or_else(bad)?;
-                    let name = toks.get(4).ok_or_else(bad)?.to_string();
-                    Property::List { name, count, item }
-                } else {
-                    let ty = toks.get(1).and_then(|t| Scalar::parse(t)).ok_or_else(bad)?;
-                    Property::Scalar { name: toks.get(2).ok_or_else(bad)?.to_string(), ty }
-                };
-                el.props.push(prop);
+                el.props.push(
+                    parse_property(&toks)
+                        .ok_or_else(|| err(Some(line_no), format!("bad property line '{text}'")))?,
+                );
             }
             Some("end_header") => break,
             Some(other) => return Err(err(Some(line_no), format!("unknown header line '{other}'"))),
         }
     }
     let format = format.ok_or_else(|| err(None, "header has no format line".into()))?;
-    let mut body = Body { format, data: bytes, pos, line: line_no, tokens: Vec::new().into_iter() };
+    Ok(Header { format, elements, pos, lines: line_no })
+}
 
-    let mut positions: Vec<Vec3> = Vec::new();
-    let mut normals: Vec<Vec3> = Vec::new();
-    let mut uvs: Vec<Vec2> = Vec::new();
-    let mut polygons: Vec<(Vec<i64>, Option<usize>)> = Vec::new();
-    for el in &elements {
+/// A `property` line's tokens: `property TYPE NAME` or `property list COUNT ITEM NAME`.
+fn parse_property(toks: &[&str]) -> Option<Property> {
+    if toks.get(1) == Some(&"list") {
+        let count = toks.get(2).and_then(|t| Scalar::parse(t))?;
+        let item = toks.get(3).and_then(|t| Scalar::parse(t))?;
+        let name = toks.get(4)?.to_string();
+        Some(Property::List { name, count, item })
+    } else {
+        let ty = toks.get(1).and_then(|t| Scalar::parse(t))?;
+        Some(Property::Scalar { name: toks.get(2)?.to_string(), ty })
+    }
+}
+
+/// What the body's `vertex` and `face` elements hold; faces with the line they were read
+/// from (ASCII) for errors.
+#[derive(Default)]
+struct Elements {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    uvs: Vec<Vec2>,
+    polygons: Vec<(Vec<i64>, Option<usize>)>,
+}
+
+/// Reads every element of the body; keeps the vertices' position, normal and uv and the
+/// faces' vertex lists, skips the rest.
+fn read_elements(body: &mut Body, header: &Header, path: &Path) -> Result<Elements, SceneError> {
+    let err = |line: Option<usize>, m: String| SceneError::parse(path, line, m);
+    let format = header.format;
+    let mut out = Elements::default();
+    for el in &header.elements {
         let is_vertex = el.name == "vertex";
         let is_face = el.name == "face";
         let col = |names: &[&str]| {
@@ -225,7 +266,7 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         let (inx, iny, inz) = (col(&["nx"]), col(&["ny"]), col(&["nz"]));
         let (iu, iv) = (col(&["u", "s", "texture_u"]), col(&["v", "t", "texture_v"]));
         if is_vertex && (ix.is_none() || iy.is_none() || iz.is_none()) {
-            return Err(err(Some(line_no), "vertex element lacks x, y or z".into()));
+            return Err(err(Some(header.lines), "vertex element lacks x, y or z".into()));
         }
         let has_n = inx.is_some() && iny.is_some() && inz.is_some();
         let has_uv = iu.is_some() && iv.is_some();
@@ -234,46 +275,62 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
             if format == Format::Ascii {
                 body.next_line().map_err(|m| err(body.where_(), m))?;
             }
-            let mut face: Option<Vec<i64>> = None;
-            for (k, p) in el.props.iter().enumerate() {
-                match p {
-                    Property::Scalar { ty, .. } => {
-                        vals[k] = body.read(*ty).map_err(|m| err(body.where_(), m))?;
-                    }
-                    Property::List { name, count, item } => {
-                        let n = body.read(*count).map_err(|m| err(body.where_(), m))?;
-                        if !(0.0..=1e6).contains(&n) {
-                            return Err(err(body.where_(), format!("bad list length {n}")));
-                        }
-                        let mut items = Vec::with_capacity(n as usize);
-                        for _ in 0..n as usize {
-                            items.push(body.read(*item).map_err(|m| err(body.where_(), m))? as i64);
-                        }
-                        if is_face && (name == "vertex_indices" || name == "vertex_index") {
-                            face = Some(items);
-                        }
-                    }
-                }
-            }
+            let face = read_item(body, el, is_face, &mut vals).map_err(|m| err(body.where_(), m))?;
             if is_vertex {
                 let g = |i: Option<usize>| vals[i.unwrap_or(0)] as f32;
-                positions.push(Vec3::new(g(ix), g(iy), g(iz)));
+                out.positions.push(Vec3::new(g(ix), g(iy), g(iz)));
                 if has_n {
-                    normals.push(Vec3::new(g(inx), g(iny), g(inz)));
+                    out.normals.push(Vec3::new(g(inx), g(iny), g(inz)));
                 }
                 if has_uv {
-                    uvs.push(Vec2::new(g(iu), g(iv)));
+                    out.uvs.push(Vec2::new(g(iu), g(iv)));
                 }
             }
             if let Some(f) = face {
-                polygons.push((f, body.where_()));
+                out.polygons.push((f, body.where_()));
             }
             if format == Format::Ascii && body.tokens.len() > 0 {
                 return Err(err(body.where_(), format!("too many values for element '{}'", el.name)));
             }
         }
     }
+    Ok(out)
+}
 
+/// One item of element `el`: its scalar properties into `vals`, and the vertex list when
+/// the element is a face (`is_face`) and the list its `vertex_indices`.
+fn read_item(
+    body: &mut Body,
+    el: &Element,
+    is_face: bool,
+    vals: &mut [f64],
+) -> Result<Option<Vec<i64>>, String> {
+    let mut face = None;
+    for (k, p) in el.props.iter().enumerate() {
+        match p {
+            Property::Scalar { ty, .. } => vals[k] = body.read(*ty)?,
+            Property::List { name, count, item } => {
+                let n = body.read(*count)?;
+                if !(0.0..=1e6).contains(&n) {
+                    return Err(format!("bad list length {n}"));
+                }
+                let mut items = Vec::with_capacity(n as usize);
+                for _ in 0..n as usize {
+                    items.push(body.read(*item)? as i64);
+                }
+                if is_face && (name == "vertex_indices" || name == "vertex_index") {
+                    face = Some(items);
+                }
+            }
+        }
+    }
+    Ok(face)
+}
+
+/// One mesh with the default grey material: faces fan-triangulated, degenerate triangles
+/// skipped (counted in the scene's stats), normals kept only when all are usable.
+fn build_scene(data: Elements, path: &Path) -> Result<Scene, SceneError> {
+    let Elements { positions, normals, uvs, polygons } = data;
     let mut scene = Scene {
         name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
         ..Scene::default()
@@ -283,10 +340,18 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let nv = positions.len() as i64;
     for (poly, line) in polygons {
         if poly.len() < 3 {
-            return Err(err(line, format!("face with {} vertices (at least 3 needed)", poly.len())));
+            return Err(SceneError::parse(
+                path,
+                line,
+                format!("face with {} vertices (at least 3 needed)", poly.len()),
+            ));
         }
         if let Some(&bad) = poly.iter().find(|&&i| i < 0 || i >= nv) {
-            return Err(err(line, format!("vertex index {bad} out of range ({nv} vertices)")));
+            return Err(SceneError::parse(
+                path,
+                line,
+                format!("vertex index {bad} out of range ({nv} vertices)"),
+            ));
         }
         for k in 1..poly.len() - 1 {
             let t = [poly[0] as u32, poly[k] as u32, poly[k + 1] as u32];

@@ -18,48 +18,91 @@ use crate::types::{Bsdf, Environment, Light, Mesh, Scene, Texturable};
 pub fn sanitize(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
     let invalid = |m: String| SceneError::Invalid { message: format!("{}: {m}", path.display()) };
     let mut warnings = Vec::new();
+    let materials = scene.materials.len();
     for mesh in &mut scene.meshes {
-        let n = mesh.positions.len() as u32;
-        if mesh.indices.len() != mesh.material_ids.len() {
-            return Err(invalid(format!("mesh '{}': one material id per triangle expected", mesh.name)));
-        }
-        if mesh.indices.iter().flatten().any(|&i| i >= n) {
-            return Err(invalid(format!("mesh '{}': vertex index out of range", mesh.name)));
-        }
-        if let Some(&m) = mesh.material_ids.iter().find(|&&m| m as usize >= scene.materials.len()) {
-            return Err(invalid(format!("mesh '{}': material id {m} out of range", mesh.name)));
-        }
-        if !mesh.normals.is_empty()
-            && (mesh.normals.len() != mesh.positions.len()
-                || mesh.normals.iter().any(|v| !v.is_finite() || *v == Vec3::ZERO))
-        {
-            warnings.push(format!("mesh '{}': invalid shading normals, using flat shading", mesh.name));
-            mesh.normals.clear();
-        }
-        if !mesh.uvs.is_empty() && mesh.uvs.len() != mesh.positions.len() {
-            warnings.push(format!("mesh '{}': uv count differs from vertex count, uvs dropped", mesh.name));
-            mesh.uvs.clear();
-        }
-        if mesh.uvs.iter().any(|t| !t.is_finite()) {
-            warnings.push(format!("mesh '{}': non-finite texture coordinates set to (0, 0)", mesh.name));
-            mesh.uvs.iter_mut().filter(|t| !t.is_finite()).for_each(|t| *t = Vec2::ZERO);
-        }
-        if mesh.positions.iter().any(|p| !p.is_finite()) {
-            remove_unreferenced(mesh);
-            if mesh.positions.iter().any(|p| !p.is_finite()) {
-                return Err(invalid(format!("mesh '{}': a triangle uses a non-finite vertex", mesh.name)));
-            }
+        sanitize_mesh(mesh, materials, &mut warnings).map_err(invalid)?;
+    }
+    check_instances(scene).map_err(invalid)?;
+    check_materials(scene, &mut warnings).map_err(invalid)?;
+    for t in &mut scene.textures {
+        if t.texels.iter().any(|c| !colour_ok(*c)) {
+            warnings.push(format!("texture '{}': non-finite texels set to 0", t.name));
+            t.texels.iter_mut().filter(|c| !colour_ok(**c)).for_each(|c| *c = Rgb::ZERO);
         }
     }
+    for l in &scene.lights {
+        if !light_ok(l) {
+            return Err(invalid(format!("light {l:?} has a non-finite or negative parameter")));
+        }
+    }
+    if let Some(c) = &scene.camera {
+        if !(c.eye.is_finite() && c.target.is_finite() && c.up.is_finite() && c.vfov_deg.is_finite()) {
+            return Err(invalid("camera is not finite".into()));
+        }
+    }
+    scene.stats.warnings.extend(warnings);
+    Ok(())
+}
+
+/// A colour a material or light may hold: finite and non-negative.
+fn colour_ok(c: Rgb) -> bool {
+    c.is_finite() && c.min_element() >= 0.0
+}
+
+/// Refuses a mesh whose indices or material ids are out of range (`materials` materials),
+/// or whose triangles use a non-finite vertex; repairs its normals, uvs and unused
+/// vertices, with a warning each.
+fn sanitize_mesh(mesh: &mut Mesh, materials: usize, warnings: &mut Vec<String>) -> Result<(), String> {
+    let n = mesh.positions.len() as u32;
+    if mesh.indices.len() != mesh.material_ids.len() {
+        return Err(format!("mesh '{}': one material id per triangle expected", mesh.name));
+    }
+    if mesh.indices.iter().flatten().any(|&i| i >= n) {
+        return Err(format!("mesh '{}': vertex index out of range", mesh.name));
+    }
+    if let Some(&m) = mesh.material_ids.iter().find(|&&m| m as usize >= materials) {
+        return Err(format!("mesh '{}': material id {m} out of range", mesh.name));
+    }
+    if !mesh.normals.is_empty()
+        && (mesh.normals.len() != mesh.positions.len()
+            || mesh.normals.iter().any(|v| !v.is_finite() || *v == Vec3::ZERO))
+    {
+        warnings.push(format!("mesh '{}': invalid shading normals, using flat shading", mesh.name));
+        mesh.normals.clear();
+    }
+    if !mesh.uvs.is_empty() && mesh.uvs.len() != mesh.positions.len() {
+        warnings.push(format!("mesh '{}': uv count differs from vertex count, uvs dropped", mesh.name));
+        mesh.uvs.clear();
+    }
+    if mesh.uvs.iter().any(|t| !t.is_finite()) {
+        warnings.push(format!("mesh '{}': non-finite texture coordinates set to (0, 0)", mesh.name));
+        mesh.uvs.iter_mut().filter(|t| !t.is_finite()).for_each(|t| *t = Vec2::ZERO);
+    }
+    if mesh.positions.iter().any(|p| !p.is_finite()) {
+        remove_unreferenced(mesh);
+        if mesh.positions.iter().any(|p| !p.is_finite()) {
+            return Err(format!("mesh '{}': a triangle uses a non-finite vertex", mesh.name));
+        }
+    }
+    Ok(())
+}
+
+/// Every instance names an existing mesh (and override material) with a finite transform.
+fn check_instances(scene: &Scene) -> Result<(), String> {
     for i in &scene.instances {
         if i.mesh as usize >= scene.meshes.len() || !i.transform.is_finite() {
-            return Err(invalid("instance with a bad mesh id or a non-finite transform".into()));
+            return Err("instance with a bad mesh id or a non-finite transform".into());
         }
         if i.material_override.is_some_and(|m| m as usize >= scene.materials.len()) {
-            return Err(invalid("instance material override out of range".into()));
+            return Err("instance material override out of range".into());
         }
     }
-    let colour_ok = |c: Rgb| c.is_finite() && c.min_element() >= 0.0;
+    Ok(())
+}
+
+/// Every material parameter finite and in range (textures existing); a constant albedo
+/// above 1 is allowed with a warning.
+fn check_materials(scene: &Scene, warnings: &mut Vec<String>) -> Result<(), String> {
     let tex_ok = |t: &Texturable| match t {
         Texturable::Constant(c) => colour_ok(*c),
         Texturable::Texture { texture, factor } => {
@@ -78,7 +121,7 @@ pub fn sanitize(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
                 }
             };
         if !ok {
-            return Err(invalid(format!("material '{}' has a non-finite or out-of-range parameter", m.name)));
+            return Err(format!("material '{}' has a non-finite or out-of-range parameter", m.name));
         }
         if let Bsdf::Diffuse { reflectance: Texturable::Constant(c) }
         | Bsdf::Plastic { diffuse: Texturable::Constant(c), .. } = &m.bsdf
@@ -92,42 +135,30 @@ pub fn sanitize(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
             }
         }
     }
-    for t in &mut scene.textures {
-        if t.texels.iter().any(|c| !colour_ok(*c)) {
-            warnings.push(format!("texture '{}': non-finite texels set to 0", t.name));
-            t.texels.iter_mut().filter(|c| !colour_ok(**c)).for_each(|c| *c = Rgb::ZERO);
-        }
-    }
-    for l in &scene.lights {
-        let ok = match l {
-            Light::Point { position, intensity } => position.is_finite() && colour_ok(*intensity),
-            Light::Spot { position, direction, intensity, cos_total_width, cos_falloff_start } => {
-                position.is_finite()
-                    && direction.is_finite()
-                    && *direction != Vec3::ZERO
-                    && colour_ok(*intensity)
-                    && cos_total_width.is_finite()
-                    && cos_falloff_start.is_finite()
-            }
-            Light::Directional { direction, irradiance } => {
-                direction.is_finite() && *direction != Vec3::ZERO && colour_ok(*irradiance)
-            }
-            Light::Environment(Environment::Constant { radiance }) => colour_ok(*radiance),
-            Light::Environment(Environment::Sky { zenith, horizon, ground }) => {
-                colour_ok(*zenith) && colour_ok(*horizon) && colour_ok(*ground)
-            }
-        };
-        if !ok {
-            return Err(invalid(format!("light {l:?} has a non-finite or negative parameter")));
-        }
-    }
-    if let Some(c) = &scene.camera {
-        if !(c.eye.is_finite() && c.target.is_finite() && c.up.is_finite() && c.vfov_deg.is_finite()) {
-            return Err(invalid("camera is not finite".into()));
-        }
-    }
-    scene.stats.warnings.extend(warnings);
     Ok(())
+}
+
+/// A light's positions and directions finite (directions non-zero), its colours finite
+/// and non-negative.
+fn light_ok(l: &Light) -> bool {
+    match l {
+        Light::Point { position, intensity } => position.is_finite() && colour_ok(*intensity),
+        Light::Spot { position, direction, intensity, cos_total_width, cos_falloff_start } => {
+            position.is_finite()
+                && direction.is_finite()
+                && *direction != Vec3::ZERO
+                && colour_ok(*intensity)
+                && cos_total_width.is_finite()
+                && cos_falloff_start.is_finite()
+        }
+        Light::Directional { direction, irradiance } => {
+            direction.is_finite() && *direction != Vec3::ZERO && colour_ok(*irradiance)
+        }
+        Light::Environment(Environment::Constant { radiance }) => colour_ok(*radiance),
+        Light::Environment(Environment::Sky { zenith, horizon, ground }) => {
+            colour_ok(*zenith) && colour_ok(*horizon) && colour_ok(*ground)
+        }
+    }
 }
 
 /// Drops vertices that no triangle uses, renumbering the triangles.

@@ -14,8 +14,8 @@
 //! cross-bilateral filters see only geometry, so they blur what the guides do not show
 //! (shadow edges of direct light): Bauszat et al. 2011 filter the indirect light and add the
 //! direct light unfiltered. They default to `--layer indirect` when the file has an
-//! indirect layer (4-spp Cornell box: 23x / 33x lower relMSE, against 2.9x / 2.3x on the
-//! full colour), else filter the colour with a note.
+//! indirect layer (docs/perf-filters.md has the errors of both choices), else filter the
+//! colour with a note.
 //!
 //! Output: `--out` must name an `.exr`; a tonemapped PNG is written beside it, as `render`
 //! does. An input layer without a single valid value (all NaN, or >= 1e30) is an error,
@@ -244,131 +244,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for w in input.warnings() {
         eprintln!("warning: {w}");
     }
-    let (w, h) = (input.width(), input.height());
-    let layer = choose_layer(&args, &input);
-    let layer_names: &[&str] = match layer {
-        Layer::Colour => &["color"],
-        Layer::Indirect => &["indirect"],
-    };
-    let noisy = input.require_layer(layer_names)?;
-    if noisy.channels() != 3 {
-        bail!("the {layer:?} layer has {} channels, expected 3", noisy.channels());
-    }
-    require_valid_values(&noisy, layer, &args.input)?;
-    report_non_finite(&noisy, "input colour");
-
-    // G-buffer.
-    let normal = guide_layer(&input, &args.normal, &["normal"], "normal")?.with_context(|| {
-        format!(
-            "{} has no normal layer (looked for normal, Normal, Denoising Normal, nn, ...; channels: {}); \
-             give one with --normal FILE",
-            args.input.display(),
-            input.channel_names().join(", ")
-        )
-    })?;
-    let position = guide_layer(&input, &args.position, &["position"], "position")?;
-    let depth = guide_layer(&input, &args.depth, &["depth"], "depth")?;
-    let albedo = guide_layer(&input, &args.albedo, &["albedo"], "albedo")?;
-    let mut guide = GBuffer::new(normal);
-    check_size(&guide.normal, w, h, "the normal layer", &args.input)?;
-    report_non_finite(&guide.normal, "normal");
-    if let Some(p) = position {
-        check_size(&p, w, h, "the position layer", &args.input)?;
-        report_non_finite(&p, "position");
-        guide = guide.with_position(p);
-    }
-    if let Some(d) = depth {
-        let d = if d.channels() == 1 { d } else { d.channels_range(0..1) };
-        check_size(&d, w, h, "the depth layer", &args.input)?;
-        report_non_finite(&d, "depth");
-        guide = guide.with_depth(d);
-    }
-    if let Some(a) = albedo {
-        check_size(&a, w, h, "the albedo layer", &args.input)?;
-        report_non_finite(&a, "albedo");
-        guide = guide.with_albedo(a);
-    }
-    guide.scene_scale = args.scene_scale;
-    let has_pos = guide.position.is_some() || guide.depth.is_some();
-
-    // Filter parameters: the paper preset, then the overrides.
-    let only = |opt: bool, flag: &str, filters: &str| -> anyhow::Result<()> {
-        if opt {
-            bail!("{flag} applies to the {filters} filter only");
-        }
-        Ok(())
-    };
-    let filter = match args.filter {
-        FilterKind::Atrous => {
-            only(args.radius.is_some(), "--radius", "guided and bilateral")?;
-            only(
-                args.eps_normal.is_some() || args.eps_depth.is_some() || args.guidance.is_some(),
-                "--eps-*/--guidance",
-                "guided",
-            )?;
-            let d = AtrousParams::paper();
-            let mut p = AtrousParams {
-                iterations: args.iterations.unwrap_or(d.iterations),
-                sigma_color: parse_sigma("sigma-color", &args.sigma_color, d.sigma_color)?,
-                sigma_normal: parse_sigma("sigma-normal", &args.sigma_normal, d.sigma_normal)?,
-                sigma_position: parse_sigma("sigma-position", &args.sigma_position, d.sigma_position)?,
-            };
-            if p.sigma_position.is_some() && !has_pos {
-                eprintln!("warning: no position or depth layer: the position weight is switched off");
-                p.sigma_position = None;
-            }
-            Filter::Atrous(p)
-        }
-        FilterKind::Guided => {
-            only(args.iterations.is_some(), "--iterations", "atrous")?;
-            only(
-                args.sigma_color.is_some() || args.sigma_normal.is_some() || args.sigma_position.is_some(),
-                "--sigma-*",
-                "atrous and bilateral",
-            )?;
-            let d = GuidedParams::paper();
-            let guidance = match args.guidance {
-                None if guide.depth.is_none() => {
-                    eprintln!(
-                        "warning: no depth layer: the guided filter uses normal-only guidance (3 channels)"
-                    );
-                    Guidance::Normal
-                }
-                None | Some(4) => Guidance::NormalDepth,
-                Some(3) => Guidance::Normal,
-                Some(1) => Guidance::GreyNormal,
-                Some(n) => bail!("--guidance must be 1, 3 or 4, got {n}"),
-            };
-            Filter::Guided(GuidedParams {
-                radius: args.radius.unwrap_or(d.radius),
-                guidance,
-                eps_normal: args.eps_normal.unwrap_or(d.eps_normal),
-                eps_depth: args.eps_depth.unwrap_or(d.eps_depth),
-            })
-        }
-        FilterKind::Bilateral => {
-            only(args.iterations.is_some(), "--iterations", "atrous")?;
-            only(
-                args.eps_normal.is_some() || args.eps_depth.is_some() || args.guidance.is_some(),
-                "--eps-*/--guidance",
-                "guided",
-            )?;
-            let d = BilateralParams::reference();
-            let radius = args.radius.unwrap_or(d.radius);
-            let mut p = BilateralParams {
-                radius,
-                sigma_spatial: radius as f32 / 2.0,
-                sigma_color: parse_sigma("sigma-color", &args.sigma_color, d.sigma_color)?,
-                sigma_normal: parse_sigma("sigma-normal", &args.sigma_normal, d.sigma_normal)?,
-                sigma_position: parse_sigma("sigma-position", &args.sigma_position, d.sigma_position)?,
-            };
-            if p.sigma_position.is_some() && !has_pos {
-                eprintln!("warning: no position or depth layer: the position weight is switched off");
-                p.sigma_position = None;
-            }
-            Filter::Bilateral(p)
-        }
-    };
+    let (layer, noisy) = read_noisy_layer(&args, &input)?;
+    let guide = read_guides(&args, &input)?;
+    let filter = filter_from_args(&args, &guide)?;
 
     // Filter (illumination when an albedo is there).
     let start = std::time::Instant::now();
@@ -379,8 +257,180 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         filter.apply(&noisy, &guide)?
     };
     let ms = start.elapsed().as_secs_f64() * 1e3;
+    let png = write_result(&args.out, &input, layer, &filtered)?;
+    eprintln!(
+        "{} {}x{} {layer:?} layer, {:?}{} in {ms:.1} ms -> {} and {}",
+        filter.name(),
+        input.width(),
+        input.height(),
+        filter,
+        if demodulate { " (albedo demodulated)" } else { "" },
+        args.out.display(),
+        png.display()
+    );
+    Ok(())
+}
+
+/// The layer to filter and its values, checked: 3 channels, some valid pixel.
+fn read_noisy_layer(args: &Args, input: &ExrImage) -> anyhow::Result<(Layer, Image)> {
+    let layer = choose_layer(args, input);
+    let layer_names: &[&str] = match layer {
+        Layer::Colour => &["color"],
+        Layer::Indirect => &["indirect"],
+    };
+    let noisy = input.require_layer(layer_names)?;
+    if noisy.channels() != 3 {
+        bail!("the {layer:?} layer has {} channels, expected 3", noisy.channels());
+    }
+    require_valid_values(&noisy, layer, &args.input)?;
+    report_non_finite(&noisy, "input colour");
+    Ok((layer, noisy))
+}
+
+/// The G-buffer: the normal (required), position, depth and albedo, each of the input's
+/// size, from IN or their own files.
+fn read_guides(args: &Args, input: &ExrImage) -> anyhow::Result<GBuffer> {
+    let (w, h) = (input.width(), input.height());
+    let normal = guide_layer(input, &args.normal, &["normal"], "normal")?.with_context(|| {
+        format!(
+            "{} has no normal layer (looked for normal, Normal, Denoising Normal, nn, ...; channels: {}); \
+             give one with --normal FILE",
+            args.input.display(),
+            input.channel_names().join(", ")
+        )
+    })?;
+    let position = guide_layer(input, &args.position, &["position"], "position")?;
+    let depth = guide_layer(input, &args.depth, &["depth"], "depth")?;
+    let albedo = guide_layer(input, &args.albedo, &["albedo"], "albedo")?;
+    let checked = |im: Image, what: &str| -> anyhow::Result<Image> {
+        check_size(&im, w, h, &format!("the {what} layer"), &args.input)?;
+        report_non_finite(&im, what);
+        Ok(im)
+    };
+    let mut guide = GBuffer::new(checked(normal, "normal")?);
+    if let Some(p) = position {
+        guide = guide.with_position(checked(p, "position")?);
+    }
+    if let Some(d) = depth {
+        let d = if d.channels() == 1 { d } else { d.channels_range(0..1) };
+        guide = guide.with_depth(checked(d, "depth")?);
+    }
+    if let Some(a) = albedo {
+        guide = guide.with_albedo(checked(a, "albedo")?);
+    }
+    guide.scene_scale = args.scene_scale;
+    Ok(guide)
+}
+
+/// Errors when `flag` was given (`set`) but applies to other filters only.
+fn only_for(set: bool, flag: &str, filters: &str) -> anyhow::Result<()> {
+    if set {
+        bail!("{flag} applies to the {filters} filter only");
+    }
+    Ok(())
+}
+
+/// The filter's parameters: the paper preset, then the overrides.
+fn filter_from_args(args: &Args, guide: &GBuffer) -> anyhow::Result<Filter> {
+    let has_pos = guide.position.is_some() || guide.depth.is_some();
+    let guided_flags = args.eps_normal.is_some() || args.eps_depth.is_some() || args.guidance.is_some();
+    let sigma_flags =
+        args.sigma_color.is_some() || args.sigma_normal.is_some() || args.sigma_position.is_some();
+    Ok(match args.filter {
+        FilterKind::Atrous => {
+            only_for(args.radius.is_some(), "--radius", "guided and bilateral")?;
+            only_for(guided_flags, "--eps-*/--guidance", "guided")?;
+            let d = AtrousParams::paper();
+            let (sigma_color, sigma_normal, sigma_position) =
+                parse_sigmas(args, d.sigma_color, d.sigma_normal, d.sigma_position)?;
+            Filter::Atrous(AtrousParams {
+                iterations: args.iterations.unwrap_or(d.iterations),
+                sigma_color,
+                sigma_normal,
+                sigma_position: position_weight(sigma_position, has_pos),
+            })
+        }
+        FilterKind::Guided => {
+            only_for(args.iterations.is_some(), "--iterations", "atrous")?;
+            only_for(sigma_flags, "--sigma-*", "atrous and bilateral")?;
+            Filter::Guided(guided_params(args, guide)?)
+        }
+        FilterKind::Bilateral => {
+            only_for(args.iterations.is_some(), "--iterations", "atrous")?;
+            only_for(guided_flags, "--eps-*/--guidance", "guided")?;
+            let d = BilateralParams::reference();
+            let radius = args.radius.unwrap_or(d.radius);
+            let (sigma_color, sigma_normal, sigma_position) =
+                parse_sigmas(args, d.sigma_color, d.sigma_normal, d.sigma_position)?;
+            Filter::Bilateral(BilateralParams {
+                radius,
+                sigma_spatial: radius as f32 / 2.0,
+                sigma_color,
+                sigma_normal,
+                sigma_position: position_weight(sigma_position, has_pos),
+            })
+        }
+    })
+}
+
+/// `--sigma-color`, `--sigma-normal`, `--sigma-position` over the preset's sigmas, in
+/// that order.
+fn parse_sigmas(
+    args: &Args,
+    color: Option<f32>,
+    normal: Option<f32>,
+    position: Option<f32>,
+) -> anyhow::Result<(Option<f32>, Option<f32>, Option<f32>)> {
+    Ok((
+        parse_sigma("sigma-color", &args.sigma_color, color)?,
+        parse_sigma("sigma-normal", &args.sigma_normal, normal)?,
+        parse_sigma("sigma-position", &args.sigma_position, position)?,
+    ))
+}
+
+/// The position weight's sigma, switched off (with a warning) when no position or depth
+/// layer is there to weigh by.
+fn position_weight(sigma: Option<f32>, has_pos: bool) -> Option<f32> {
+    if sigma.is_some() && !has_pos {
+        eprintln!("warning: no position or depth layer: the position weight is switched off");
+        return None;
+    }
+    sigma
+}
+
+/// The guided filter's parameters: `--guidance` (default normal + depth, normal-only
+/// without a depth layer), radius and eps over the paper's preset.
+fn guided_params(args: &Args, guide: &GBuffer) -> anyhow::Result<GuidedParams> {
+    let d = GuidedParams::paper();
+    let guidance = match args.guidance {
+        None if guide.depth.is_none() => {
+            eprintln!("warning: no depth layer: the guided filter uses normal-only guidance (3 channels)");
+            Guidance::Normal
+        }
+        None | Some(4) => Guidance::NormalDepth,
+        Some(3) => Guidance::Normal,
+        Some(1) => Guidance::GreyNormal,
+        Some(n) => bail!("--guidance must be 1, 3 or 4, got {n}"),
+    };
+    Ok(GuidedParams {
+        radius: args.radius.unwrap_or(d.radius),
+        guidance,
+        eps_normal: args.eps_normal.unwrap_or(d.eps_normal),
+        eps_depth: args.eps_depth.unwrap_or(d.eps_depth),
+    })
+}
+
+/// Writes `--out` (colour: `direct + filtered indirect` when the indirect layer was
+/// filtered and the file has a direct layer, plus the filtered layer itself) and the
+/// tonemapped PNG beside it; returns the PNG's path.
+fn write_result(
+    out_path: &Path,
+    input: &ExrImage,
+    layer: Layer,
+    filtered: &Image,
+) -> anyhow::Result<PathBuf> {
     let result = match (layer, input.layer(&["direct"])) {
-        (Layer::Indirect, Some(direct)) if direct.same_size(&filtered) && direct.channels() == 3 => {
+        (Layer::Indirect, Some(direct)) if direct.same_size(filtered) && direct.channels() == 3 => {
             let mut sum = filtered.clone();
             for (s, d) in sum.data_mut().iter_mut().zip(direct.data()) {
                 *s += if d.is_finite() { *d } else { 0.0 };
@@ -389,22 +439,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         _ => filtered.clone(),
     };
-    let mut out = ExrImage::new(w, h);
+    let mut out = ExrImage::new(input.width(), input.height());
     out.insert("", &["R", "G", "B"], &result)?;
     if layer == Layer::Indirect {
-        out.insert("indirect_filtered", &["R", "G", "B"], &filtered)?;
+        out.insert("indirect_filtered", &["R", "G", "B"], filtered)?;
     }
-    write_exr(&args.out, &out).with_context(|| format!("writing {}", args.out.display()))?;
-    let png = args.out.with_extension("png");
+    write_exr(out_path, &out).with_context(|| format!("writing {}", out_path.display()))?;
+    let png = out_path.with_extension("png");
     write_png(&png, &result, &TonemapParams::srgb_clamp())
         .with_context(|| format!("writing {}", png.display()))?;
-    eprintln!(
-        "{} {w}x{h} {layer:?} layer, {:?}{} in {ms:.1} ms -> {} and {}",
-        filter.name(),
-        filter,
-        if demodulate { " (albedo demodulated)" } else { "" },
-        args.out.display(),
-        png.display()
-    );
-    Ok(())
+    Ok(png)
 }

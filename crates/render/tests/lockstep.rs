@@ -182,17 +182,45 @@ fn lockstep_films_equal_scalar_films_with_every_feature() {
     assert_identical("lockstep_all_features.toml", &scene, 45, 30, 6);
 }
 
-/// The every-feature scene with more than eight materials (unused copies appended): the
-/// per-lane material lookups (`SmallMaterials` only covers up to eight).
+/// The every-feature scene with more than eight materials: nine unused copies put in
+/// front, so every material id is above eight (the gathered material table, not the
+/// eight-entry one).
 #[test]
 fn lockstep_films_equal_scalar_films_with_many_materials() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_all_features.toml");
     let mut scene = filtrace_scene::toml_scene::load_toml(&path).unwrap();
-    while scene.materials.len() <= 8 {
-        let m = scene.materials[0].clone();
-        scene.materials.push(m);
+    const SHIFT: u32 = 9;
+    let copies = (0..SHIFT as usize).map(|i| scene.materials[i % scene.materials.len()].clone());
+    scene.materials.splice(0..0, copies.collect::<Vec<_>>());
+    for mesh in &mut scene.meshes {
+        mesh.material_ids.iter_mut().for_each(|m| *m += SHIFT);
     }
-    assert_identical("lockstep_all_features.toml + materials", &scene, 45, 30, 4);
+    for inst in &mut scene.instances {
+        if let Some(m) = &mut inst.material_override {
+            *m += SHIFT;
+        }
+    }
+    assert!(scene.materials.len() > 8 + SHIFT as usize / 2);
+    assert_identical("lockstep_all_features.toml, materials shifted by 9", &scene, 45, 30, 4);
+}
+
+/// A scene with more than eight instances (the every-feature scene's instances copied
+/// and moved): the instances' rows by gathers (`InstanceRows` of any length).
+#[test]
+fn lockstep_films_equal_scalar_films_with_many_instances() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/lockstep_all_features.toml");
+    let mut scene = filtrace_scene::toml_scene::load_toml(&path).unwrap();
+    let base = scene.instances.clone();
+    let mut k = 0.0f32;
+    while scene.instances.len() <= 16 {
+        k += 1.0;
+        for inst in &base {
+            let mut copy = inst.clone();
+            copy.transform = Affine3A::from_translation(Vec3::new(0.37 * k, 0.0, -0.61 * k)) * inst.transform;
+            scene.instances.push(copy);
+        }
+    }
+    assert_identical("lockstep_all_features.toml, instances copied", &scene, 45, 30, 4);
 }
 
 /// A scene with eight lights of every kind: the lockstep integrator's in-lane light choice

@@ -180,6 +180,45 @@ pub fn gather<const A: bool>(table: &[f32], idx: U8<A>) -> F8<A> {
     })
 }
 
+/// [`gather`] of a table of `u32` words.
+#[inline(always)]
+pub fn gather_u32<const A: bool>(table: &[u32], idx: U8<A>) -> U8<A> {
+    assert!(!table.is_empty() && table.len() <= i32::MAX as usize, "gather: table of {} words", table.len());
+    let last = U8::<A>::splat((table.len() - 1) as u32);
+    let idx = idx.min(last);
+    // SAFETY (AVX2 branch): every index is at most `table.len() - 1` (clamped above).
+    avx_or!(
+        A,
+        U8(_mm256_castsi256_ps(_mm256_i32gather_epi32::<4>(
+            table.as_ptr() as *const i32,
+            _mm256_castps_si256(idx.0)
+        ))),
+        {
+            let i = idx.to_array();
+            U8::from_array(per_lane(|k| table[i[k] as usize]))
+        }
+    )
+}
+
+/// `table[idx[i]]` for a table of any length (indices in range): [`lookup8`] (one
+/// `vpermps`) for exactly eight entries, else [`gather`].
+#[inline(always)]
+pub fn lookup<const A: bool>(table: &[f32], idx: U8<A>) -> F8<A> {
+    match <&[f32; LANES]>::try_from(table) {
+        Ok(t) => lookup8(t, idx),
+        Err(_) => gather(table, idx),
+    }
+}
+
+/// [`lookup`] of a table of `u32` words.
+#[inline(always)]
+pub fn lookup_u32<const A: bool>(table: &[u32], idx: U8<A>) -> U8<A> {
+    match <&[u32; LANES]>::try_from(table) {
+        Ok(t) => lookup8_u32(t, idx),
+        Err(_) => gather_u32(table, idx),
+    }
+}
+
 /// Lanes of `m` whose word is not zero (words `u32::MAX` / 0, as [`lookup8_u32`] of a
 /// mask table returns them).
 #[inline(always)]

@@ -87,8 +87,8 @@ mod vec3;
 
 pub use float::select;
 pub use gather::{
-    alias_pick8, columns, compress_store, compress_store_u32, gather, load8, load8_u32, lookup8, lookup8_u32,
-    mask_of, mask_words, trunc_below,
+    alias_pick8, columns, compress_store, compress_store_u32, gather, gather_u32, load8, load8_u32, lookup,
+    lookup8, lookup8_u32, lookup_u32, mask_of, mask_words, trunc_below,
 };
 pub use mask::{bits, from_bits};
 pub use vec3::V8;

@@ -95,3 +95,24 @@ fn alias_pick8_matches_alias_table_sample() {
         }
     }
 }
+
+/// `lookup` / `lookup_u32` read `table[idx]` for tables of eight entries (`vpermps`) and
+/// of any other length (`vgatherdps`), portable and AVX2 alike.
+#[test]
+fn lookups_read_the_indexed_entries_for_any_table_length() {
+    for len in [1usize, 3, 8, 9, 117] {
+        let f: Vec<f32> = (0..len).map(|k| k as f32 * 1.25 - 3.0).collect();
+        let w: Vec<u32> = (0..len).map(|k| (k as u32).wrapping_mul(2_654_435_761)).collect();
+        let idx: [u32; LANES] = std::array::from_fn(|i| ((i * 37 + 5) % len) as u32);
+        let (a, b) = (lookup::<false>(&f, U8::from_array(idx)), lookup_u32::<false>(&w, U8::from_array(idx)));
+        for i in 0..LANES {
+            assert_eq!((a.lane(i), b.to_array()[i]), (f[idx[i] as usize], w[idx[i] as usize]), "len {len}");
+        }
+        #[cfg(target_arch = "x86_64")]
+        if filtrace_core::cpu::isa().has_avx2() {
+            let a2 = lookup::<true>(&f, U8::from_array(idx));
+            let b2 = lookup_u32::<true>(&w, U8::from_array(idx));
+            assert_eq!((a2.to_array(), b2.to_array()), (a.to_array(), b.to_array()), "len {len}");
+        }
+    }
+}

@@ -15,8 +15,8 @@
 //! closest-hit queries followed by the hit records (`from_hit` in lanes: the triangle
 //! records are loaded as rows and transposed, vertex normals gathered per lane and
 //! interpolated in lanes). Material
-//! flags and Lambert reflectances are table lookups in lanes for scenes with at most eight
-//! materials.
+//! flags, Lambert reflectances and the instances' first rows are table lookups in lanes
+//! (`vpermps` for up to eight entries, `vgatherdps` for more).
 //!
 //! **Exactness is the contract.** Every lane performs the operations of
 //! [`super::path::li`] / [`super::path::trace_from_hit`] in the same order (see

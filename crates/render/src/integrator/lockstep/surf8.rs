@@ -3,7 +3,7 @@
 
 use super::LockstepContext;
 use crate::integrator::lanes::{
-    bits, columns, from_bits, lookup8_u32, mask_of, mask_words, per_lane, select, F8, LANES, M8, U8, V8,
+    bits, columns, from_bits, lookup_u32, mask_of, mask_words, per_lane, select, F8, LANES, M8, U8, V8,
 };
 use crate::surface::{gamma, SurfaceInteraction, OFFSET_FLOOR, OFFSET_SAFETY, TRI_FLOATS};
 use filtrace_accel::HitPacket;
@@ -96,27 +96,14 @@ pub(super) fn from_hits<const A: bool>(
         return M8::none();
     }
     // Rows of the lanes' triangle records (row 0 for the lanes without a hit: read, unused)
-    // and the lanes on meshes with vertex attributes.
-    let (start, attributes) = match lc.tables.first_tris() {
-        Some(t) => {
-            // At most eight instances: the rows and attribute flags by table lookups.
-            let inst = U8::<A>::from_array(hits.instance);
-            let in_mask = mask_words(from_bits::<A>(hits.mask));
-            let rows = lookup8_u32(&t.first, inst).wrapping_add(U8::from_array(hits.prim)).and(in_mask);
-            let rows = rows.to_array();
-            let attributes = bits(mask_of(lookup8_u32(&t.attributes, inst).and(in_mask)));
-            (per_lane(|i| rows[i] as usize * TRI_FLOATS), attributes)
-        }
-        None => {
-            let (mut start, mut attributes) = ([0usize; LANES], 0u8);
-            for i in lanes_of(from_bits::<A>(hits.mask)) {
-                let (row, attr) = ctx.geometry.row(hits.instance[i], hits.prim[i]);
-                start[i] = row * TRI_FLOATS;
-                attributes |= (attr as u8) << i;
-            }
-            (start, attributes)
-        }
-    };
+    // and the lanes on meshes with vertex attributes, by table lookups.
+    let t = lc.tables.instance_rows();
+    let inst = U8::<A>::from_array(hits.instance);
+    let in_mask = mask_words(from_bits::<A>(hits.mask));
+    let rows = lookup_u32(&t.first, inst).wrapping_add(U8::from_array(hits.prim)).and(in_mask);
+    let rows = rows.to_array();
+    let attributes = bits(mask_of(lookup_u32(&t.attributes, inst).and(in_mask)));
+    let start = per_lane(|i| rows[i] as usize * TRI_FLOATS);
     // The records as lanes: words 0..8 and 6..14 of each row, transposed (the rows lie in
     // the table: every hit indexes a record).
     let words = ctx.geometry.tri_words();

@@ -1,7 +1,8 @@
 //! The lookup tables of the lockstep tracer, owned by it and built from the scene, its
-//! [`SceneGeometry`] and its [`LightSet`]: eight-entry tables for scenes with at most eight
-//! materials, instances or lights (one `vpermps` per field, [`lookup8`](super::super::
-//! lanes::lookup8)), and the area lights as rows of words (transposed into lanes by
+//! [`SceneGeometry`] and its [`LightSet`]: per material and per instance tables of any
+//! length (read by [`lookup`](super::super::lanes::lookup): one `vpermps` per field for up
+//! to eight entries, a `vgatherdps` for more), eight-entry tables for scenes with at most
+//! eight lights, and the area lights as rows of words (transposed into lanes by
 //! [`columns`](super::super::lanes::columns)). Every value is one the scalar code reads,
 //! so a lane looks up what the scalar path computes.
 //!
@@ -14,7 +15,7 @@ use crate::surface::{SceneGeometry, TRI_FLOATS};
 use filtrace_core::Rgb;
 use filtrace_scene::{MaterialId, Scene};
 
-/// [`SmallMaterials::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
+/// [`MaterialTable::flags`] bit: an untextured Lambert BSDF ([`SceneGeometry::
 /// constant_diffuse`] is `Some`).
 pub(crate) const MAT_DIFFUSE: u32 = 1;
 /// Flag: the material emits (`is_emissive()` and a non-zero emission).
@@ -27,14 +28,15 @@ pub(crate) const MAT_TWO_SIDED: u32 = 4;
 /// light).
 pub(crate) const AREA_FLOATS: usize = 16;
 
-/// The materials of a scene with at most eight of them as eight-entry tables (lane `m` =
-/// material `m`): flags ([`MAT_DIFFUSE`], [`MAT_EMITS`], [`MAT_TWO_SIDED`]) and the
-/// reflectance of the untextured Lambert ones (zero for the others). Only built when every
-/// triangle's material is in range.
+/// The materials as tables indexed by material id (entry `m` = material `m`; zeros up to
+/// eight entries, so that up to eight materials take the `vpermps` lookup): flags
+/// ([`MAT_DIFFUSE`], [`MAT_EMITS`], [`MAT_TWO_SIDED`]) and the reflectance of the
+/// untextured Lambert ones (zero for the others). Only built when every triangle's
+/// material is in range.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct SmallMaterials {
-    pub(crate) flags: [u32; 8],
-    pub(crate) rho: [[f32; 8]; 3],
+pub(crate) struct MaterialTable {
+    pub(crate) flags: Vec<u32>,
+    pub(crate) rho: [Vec<f32>; 3],
 }
 
 /// The selection table and the area lights of a scene with one to eight lights as
@@ -54,6 +56,10 @@ pub(crate) struct SmallLights {
     pub(crate) two_sided: [u32; 8],
     pub(crate) is_directional: [u32; 8],
     pub(crate) is_environment: [u32; 8],
+    /// Some light is directional / the environment (else `choose_small` skips the lookups
+    /// of `is_directional` / `is_environment`).
+    pub(crate) has_directional: bool,
+    pub(crate) has_environment: bool,
     /// Per directional light its unit direction towards the light and its irradiance
     /// (xyz / rgb rows; zero for the other lights).
     pub(crate) to_light: [[f32; 8]; 3],
@@ -62,22 +68,21 @@ pub(crate) struct SmallLights {
     pub(crate) field: [[f32; 8]; AREA_FLOATS],
 }
 
-/// Per instance of a scene with at most eight of them (lane `i` = instance `i`): the row
-/// of its first triangle in [`SceneGeometry::tri_words`] (triangle `prim` is row
-/// `first[i] + prim`, as [`SceneGeometry::row`] gives it) and `u32::MAX` when its mesh
-/// has vertex normals or uvs, else 0.
-#[derive(Clone, Copy, Debug, Default)]
+/// Per instance (entry `i` = instance `i`; zeros up to eight entries): the row of its
+/// first triangle in [`SceneGeometry::tri_words`] (triangle `prim` is row `first[i] +
+/// prim`, as [`SceneGeometry::row`] gives it) and `u32::MAX` when its mesh has vertex
+/// normals or uvs, else 0.
+#[derive(Clone, Debug, Default)]
 pub(crate) struct InstanceRows {
-    pub(crate) first: [u32; 8],
-    pub(crate) attributes: [u32; 8],
+    pub(crate) first: Vec<u32>,
+    pub(crate) attributes: Vec<u32>,
 }
 
 /// Everything the lockstep tracer looks up in tables (see the module docs).
 #[derive(Clone, Debug, Default)]
 pub struct LockstepTables {
-    small_materials: Option<Box<SmallMaterials>>,
-    /// [`InstanceRows`] of scenes of at most eight instances.
-    first_tris: Option<InstanceRows>,
+    materials: Option<MaterialTable>,
+    instance_rows: InstanceRows,
     /// Per light [`AREA_FLOATS`] words: the values of [`LightSet::area_light`].
     area_words: Vec<f32>,
     small_lights: Option<Box<SmallLights>>,
@@ -87,8 +92,8 @@ impl LockstepTables {
     /// The tables of `scene` with its geometry and lights.
     pub fn new(scene: &Scene, geometry: &SceneGeometry, lights: &LightSet) -> Self {
         let mut t = LockstepTables {
-            small_materials: small_materials(scene, geometry).map(Box::new),
-            first_tris: first_tris(scene, geometry),
+            materials: material_table(scene, geometry),
+            instance_rows: instance_rows(scene, geometry),
             ..Default::default()
         };
         t.update_lights(lights);
@@ -115,16 +120,16 @@ impl LockstepTables {
         self.small_lights = small_lights(lights, &self.area_words).map(Box::new);
     }
 
-    /// [`SmallMaterials`] of scenes with at most eight materials.
+    /// The [`MaterialTable`] (`None` when a triangle's material is out of range).
     #[inline]
-    pub(crate) fn small_materials(&self) -> Option<&SmallMaterials> {
-        self.small_materials.as_deref()
+    pub(crate) fn materials(&self) -> Option<&MaterialTable> {
+        self.materials.as_ref()
     }
 
-    /// [`InstanceRows`] of scenes of at most eight instances.
+    /// The [`InstanceRows`].
     #[inline]
-    pub(crate) fn first_tris(&self) -> Option<&InstanceRows> {
-        self.first_tris.as_ref()
+    pub(crate) fn instance_rows(&self) -> &InstanceRows {
+        &self.instance_rows
     }
 
     /// The area lights as rows of [`AREA_FLOATS`] words (row `i` = light `i`).
@@ -140,27 +145,30 @@ impl LockstepTables {
     }
 }
 
-fn first_tris(scene: &Scene, geometry: &SceneGeometry) -> Option<InstanceRows> {
+/// Entries per table: at least eight (the `vpermps` lookup reads eight words).
+fn table_len(n: usize) -> usize {
+    n.max(8)
+}
+
+fn instance_rows(scene: &Scene, geometry: &SceneGeometry) -> InstanceRows {
     let n = scene.instances.len();
-    if n > 8 {
-        return None;
-    }
-    let mut t = InstanceRows::default();
+    let mut t = InstanceRows { first: vec![0; table_len(n)], attributes: vec![0; table_len(n)] };
     for i in 0..n {
         let (row, attributes) = geometry.row(i as u32, 0);
         t.first[i] = row as u32;
         t.attributes[i] = if attributes { u32::MAX } else { 0 };
     }
-    Some(t)
+    t
 }
 
-fn small_materials(scene: &Scene, geometry: &SceneGeometry) -> Option<SmallMaterials> {
+fn material_table(scene: &Scene, geometry: &SceneGeometry) -> Option<MaterialTable> {
     let n = scene.materials.len();
     let in_range = |row: &[f32]| (row[TRI_FLOATS - 1].to_bits() as usize) < n;
-    if n > 8 || !geometry.tri_words().chunks_exact(TRI_FLOATS).all(in_range) {
+    if n == 0 || !geometry.tri_words().chunks_exact(TRI_FLOATS).all(in_range) {
         return None;
     }
-    let mut t = SmallMaterials::default();
+    let len = table_len(n);
+    let mut t = MaterialTable { flags: vec![0; len], rho: [vec![0.0; len], vec![0.0; len], vec![0.0; len]] };
     for (i, m) in scene.materials.iter().enumerate() {
         let rho = geometry.constant_diffuse(i as MaterialId);
         let emits = m.is_emissive() && m.emission != Rgb::ZERO;
@@ -194,12 +202,14 @@ fn small_lights(lights: &LightSet, area_words: &[f32]) -> Option<SmallLights> {
         }
         if let Some(d) = lights.directional_light(i) {
             t.is_directional[i] = u32::MAX;
+            t.has_directional = true;
             for c in 0..3 {
                 (t.to_light[c][i], t.irradiance[c][i]) = (d.to_light[c], d.irradiance[c]);
             }
         }
         if lights.emitter_kind(i) == Some(EmitterKind::Environment) {
             t.is_environment[i] = u32::MAX;
+            t.has_environment = true;
         }
         for (f, w) in t.field.iter_mut().zip(&area_words[i * AREA_FLOATS..(i + 1) * AREA_FLOATS]) {
             f[i] = *w;
@@ -222,7 +232,7 @@ mod tests {
         let geometry = SceneGeometry::new(&scene);
         let mut lights = LightSet::build(&scene);
         let mut tables = LockstepTables::new(&scene, &geometry, &lights);
-        assert!(tables.small_lights().is_some() && tables.small_materials().is_some());
+        assert!(tables.small_lights().is_some() && tables.materials().is_some());
         let light = (0..scene.instances.len() as u32)
             .find(|&i| lights.area_light_index(i, 0).is_some() || lights.area_light_index(i, 1).is_some())
             .expect("the Cornell box has an emissive instance");

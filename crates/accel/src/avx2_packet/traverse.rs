@@ -228,15 +228,7 @@ pub(crate) unsafe fn closest_bvh(
     rays: &RayPacket,
     active: u8,
 ) -> Option<Closest8> {
-    // Direction signs first: the cheapest test of coherence.
-    let b = Boxes8::new(rays, active as u32)?;
-    if direction_spread(rays, active as u32) > MAX_SPREAD {
-        return None;
-    }
-    let r = setup(rays, active as u32);
-    if r.active != 0 && !nodes.is_empty() {
-        r.uniform?;
-    }
+    let (r, b) = coherent(nodes, rays, active)?;
     Some(closest_packet::<_, _, true>(nodes, tris, &r, &b, &mut Together, 0))
 }
 
@@ -253,6 +245,15 @@ pub(crate) unsafe fn occluded_bvh(
     rays: &RayPacket,
     active: u8,
 ) -> Option<u8> {
+    let (r, b) = coherent(nodes, rays, active)?;
+    Some(occluded_packet(nodes, tris, &r, &b, &mut Together, 0))
+}
+
+/// The registers and boxes of the lanes of `rays` set in `active` when they are coherent
+/// enough for one traversal of `nodes` (the criterion of [`closest_bvh`]), else `None`.
+#[inline(always)]
+unsafe fn coherent<'a>(nodes: &[Node8], rays: &'a RayPacket, active: u8) -> Option<(Regs<'a>, Boxes8)> {
+    // Direction signs first: the cheapest test of coherence.
     let b = Boxes8::new(rays, active as u32)?;
     if direction_spread(rays, active as u32) > MAX_SPREAD {
         return None;
@@ -261,7 +262,7 @@ pub(crate) unsafe fn occluded_bvh(
     if r.active != 0 && !nodes.is_empty() {
         r.uniform?;
     }
-    Some(occluded_packet(nodes, tris, &r, &b, &mut Together, 0))
+    Some((r, b))
 }
 
 /// The leaf `cur` of a packet traversal (its triangle ids `cur.child..+cur.count` packets)

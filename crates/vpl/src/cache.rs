@@ -4,7 +4,9 @@
 //! draw VPLs from the interpolated distributions.
 //!
 //! One frame, in order (the thesis's listing 1):
-//! 1. [`place_cache_points`]: back-project stratified screen samples through the G-buffer;
+//! 1. [`place_on_surfaces`] (the renderer: surfaces traced pixel by pixel as the
+//!    placement asks) or [`place_cache_points`] (a G-buffer in memory): back-project
+//!    stratified screen samples through the G-buffer;
 //! 2. [`ImportanceCache::build`]: evaluate every VPL at every record (through
 //!    [`VplSet`]) into the distributions full E¹, unoccluded E², bounded E³ and
 //!    conservative E⁴ = uniform, with their CDFs; parameters of the `optimized` sampler

@@ -123,7 +123,7 @@ fn sanitised(w: f32) -> f32 {
 /// built with the same arithmetic (f64 sums, so the same `f32` values) and sampled with
 /// the same rule (the partition point of `cdf[1..] <= u`, zero cells skipped), so pmfs and
 /// draws are identical (`vpl_cdf_equals_distribution1d`); only the search differs: the
-/// last value of each block of [`CDF_BLOCK`] cells is kept as a coarse index.
+/// last value of each block of `CDF_BLOCK` cells is kept as a coarse index.
 #[derive(Clone, Debug, Default)]
 pub struct VplCdf {
     /// `cdf[i]` = probability of cells `< i`; `cdf[n] = 1`; length `n + 1`.

@@ -409,12 +409,12 @@ impl VplSet for SceneVpls<'_> {
         self.bounded_at(&self.vpls.vpls[vpl], rx, region, &relaxed)
     }
 
-    /// The same values as [`evaluate_each_vpl`], bit for bit, with one evaluation of each
+    /// The same values as [`crate::cache::evaluate_each_vpl`], bit for bit, with one evaluation of each
     /// VPL's contribution (the per-VPL methods find it twice), eight VPLs at a time for a
     /// diffuse receiver and emitter or diffuse VPLs (`vpls/soa.rs`), the bounded term from
     /// the BSDF values the contribution found (`contribution_parts`; the reference
     /// evaluates both BSDFs again), and the visibility rays traced as fans of eight from
-    /// the record's point ([`ShadowPackets`]; VPLs that cannot light the record, e.g.
+    /// the record's point (`ShadowPackets`; VPLs that cannot light the record, e.g.
     /// behind its surface, get no ray). The RGB totals are summed in VPL order
     /// afterwards, as the reference does.
     fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {

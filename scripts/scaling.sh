@@ -6,13 +6,15 @@
 #   scripts/scaling.sh A_BIN B_BIN [THREADS]      THREADS default: "1 2 4 8 16"
 #   e.g. scripts/scaling.sh /tmp/main-filtrace target/release/filtrace > scaling.md
 #
-# Built-in scenes only (cornell, grass; bunny-room too when the bunny is found under
-# $FILTRACE_SHARED or ../shared). About 2-3 minutes on 16 idle cores; needs python3 for the
-# tables. Run on an idle machine: the numbers are wall-clock times.
+# Built-in scenes (cornell, grass; bunny-room and engine too when the bunny and the engine
+# glTF are found under $FILTRACE_SHARED or ../shared) and the VPL frame on cornell. About
+# 4 minutes on 16 idle cores; needs python3 for the tables. Run on an idle machine: the
+# numbers are wall-clock times. REPORT_ONLY=1 with OUT_DIR set prints the tables of an
+# earlier run's JSON without running anything.
 set -euo pipefail
 
 if [ $# -lt 2 ]; then
-    sed -n '2,10p' "$0" >&2
+    sed -n '2,14p' "$0" >&2
     exit 2
 fi
 A=$1
@@ -25,9 +27,13 @@ command -v python3 > /dev/null || { echo "scaling.sh: python3 is needed for the 
 OUT_DIR=${OUT_DIR:-$(mktemp -d /tmp/scaling.XXXXXX)}
 mkdir -p "$OUT_DIR"
 
+SHARED=${FILTRACE_SHARED:-../shared}
 SCENES=cornell,grass
-if [ -f "${FILTRACE_SHARED:-../shared}/scenes/bunny/bunny.obj" ]; then
-    SCENES=cornell,bunny-room,grass
+if [ -f "$SHARED/scenes/bunny/bunny.obj" ]; then
+    SCENES=$SCENES,bunny-room
+fi
+if [ -f "$SHARED/scenes/gltf/2CylinderEngine.glb" ]; then
+    SCENES=$SCENES,engine
 fi
 
 # One run: $1 = label (A/B), $2 = binary, $3 = threads, $4 = benchmark name, rest: arguments.
@@ -42,13 +48,15 @@ run() {
 }
 
 start=$(date +%s)
-for t in $THREADS; do
+[ -n "${REPORT_ONLY:-}" ] && THREADS_RUN="" || THREADS_RUN=$THREADS
+for t in $THREADS_RUN; do
     for label in A B; do
         bin=$A
         [ $label = B ] && bin=$B
         run $label "$bin" "$t" guided bench filters --res 1920x1080 --only guided --repeats 5
         run $label "$bin" "$t" atrous bench filters --res 1920x1080 --only a-trous --repeats 3
         run $label "$bin" "$t" pipeline bench pipeline --threads "$t" --filter guided --frames 10 --warmup 2
+        run $label "$bin" "$t" vpl bench vpl cornell --res 512x512 --repeat 3 --samplers balance,optimized
         run $label "$bin" "$t" suite bench suite --scenes "$SCENES" --no-rays --threads "$t" --spp 8 --repeats 3
     done
     echo "scaling.sh: $t threads done after $(($(date +%s) - start)) s" >&2
@@ -133,6 +141,17 @@ table("À-Trous, 1920x1080, 10 iterations, 3 weights: median wall ms", "ms",
 table("Pipeline, Cornell 512², 1 spp, guided: median frames/s", "fps", pipeline("fps"), False)
 table("Pipeline, Cornell 512², 1 spp, guided: filter stage median ms", "ms", pipeline("filter"), True)
 table("Pipeline, Cornell 512², 1 spp, guided: guide stage median ms", "ms", pipeline("guide"), True)
+def vpl(sampler, stage):
+    def get(label, t):
+        j = load("vpl", label, t)
+        row = next((r for r in (j or {}).get("rows", []) if r.get("sampler") == sampler), None)
+        return None if row is None else row.get(stage)
+    return get
+
+
+for sampler in ("balance", "optimized"):
+    table(f"VPL frame, cornell 512², 1 spp, 2048 VPLs, 1024 cache points, {sampler}: median total ms", "ms",
+          vpl(sampler, "total_ms"), True)
 scenes = []
 for t in threads:
     for s in (load("suite", "A", t) or {}).get("scenes", []):

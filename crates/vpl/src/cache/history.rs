@@ -143,20 +143,15 @@ impl Arrivals {
     /// skipping records out of `0..records` and zero weights.
     fn group(&mut self, parts: &[&[SampleFeedback]], records: usize) {
         let n = records;
-        let all = || {
-            parts
-                .iter()
-                .enumerate()
-                .flat_map(|(p, fbs)| fbs.iter().enumerate().map(move |(i, fb)| (p, i, fb)))
-        };
-        fn entries(fb: &SampleFeedback, n: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
-            fb.records().filter(move |&(l, w)| l < n && w > 0.0)
-        }
         let start = &mut self.start;
         start.clear();
         start.resize(n + 1, 0);
-        for (_, _, fb) in all() {
-            entries(fb, n).for_each(|(l, _)| start[l + 1] += 1);
+        for fb in parts.iter().flat_map(|fbs| fbs.iter()) {
+            for (l, w) in fb.records() {
+                if l < n && w > 0.0 {
+                    start[l + 1] += 1;
+                }
+            }
         }
         for l in 0..n {
             start[l + 1] += start[l];
@@ -164,10 +159,14 @@ impl Arrivals {
         // Filled at `start[l]`, which moves to `start[l + 1]`; shifted back after.
         self.list.clear();
         self.list.resize(start[n], (0, 0, 0.0));
-        for (p, i, fb) in all() {
-            for (l, w) in entries(fb, n) {
-                self.list[start[l]] = (p as u32, i as u32, w);
-                start[l] += 1;
+        for (p, fbs) in parts.iter().enumerate() {
+            for (i, fb) in fbs.iter().enumerate() {
+                for (l, w) in fb.records() {
+                    if l < n && w > 0.0 {
+                        self.list[start[l]] = (p as u32, i as u32, w);
+                        start[l] += 1;
+                    }
+                }
             }
         }
         start.copy_within(0..n, 1);

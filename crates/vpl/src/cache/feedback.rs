@@ -60,6 +60,7 @@ impl SampleFeedback {
 
     /// `(record, weight)` pairs.
     pub fn records(&self) -> impl Iterator<Item = (usize, f32)> + '_ {
-        (0..self.len as usize).map(|s| (self.ids[s] as usize, self.weights[s]))
+        let len = (self.len as usize).min(MAX_NEIGHBOURS);
+        self.ids[..len].iter().zip(&self.weights[..len]).map(|(&l, &w)| (l as usize, w))
     }
 }

@@ -35,6 +35,17 @@ pub struct StoredSample {
 pub struct SampleHistory {
     records: Vec<RecordSamples>,
     capacity: usize,
+    /// [`SampleHistory::add_parts`]'s per-record lists, kept so that a frame's passes
+    /// (and, after [`SampleHistory::reset`], its next frames) reuse their memory.
+    arrivals: Arrivals,
+}
+
+/// A pass's feedback entries grouped by record (compressed rows): record `l`'s entries
+/// are `list[start[l]..start[l + 1]]`, each (part, index in it, weight), in feedback order.
+#[derive(Clone, Debug, Default)]
+struct Arrivals {
+    start: Vec<usize>,
+    list: Vec<(u32, u32, f32)>,
 }
 
 /// A record's mixture and control-variate weights `(α', β)`.
@@ -52,7 +63,21 @@ struct RecordSamples {
 impl SampleHistory {
     /// An empty history of `records` records keeping at most `capacity` samples each.
     pub fn new(records: usize, capacity: usize) -> Self {
-        SampleHistory { records: vec![RecordSamples::default(); records], capacity: capacity.max(1) }
+        SampleHistory {
+            records: vec![RecordSamples::default(); records],
+            capacity: capacity.max(1),
+            arrivals: Arrivals::default(),
+        }
+    }
+
+    /// Empties the history for a frame of `records` records keeping at most `capacity`
+    /// samples each, as [`SampleHistory::new`] would, but keeping the memory of the
+    /// records it had (a sequence's frames usually have the same records).
+    pub fn reset(&mut self, records: usize, capacity: usize) {
+        self.records.truncate(records);
+        self.records.iter_mut().for_each(RecordSamples::clear);
+        self.records.resize_with(records, RecordSamples::default);
+        self.capacity = capacity.max(1);
     }
 
     /// Number of records.
@@ -96,35 +121,15 @@ impl SampleHistory {
     /// [`SampleHistory::add`] of the parts' feedback one after the other (e.g. per tile,
     /// in tile order), without gathering it into one list first.
     pub fn add_parts(&mut self, parts: &[&[SampleFeedback]]) {
-        let n = self.records.len();
-        fn entries(fb: &SampleFeedback, n: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
-            fb.records().filter(move |&(l, w)| l < n && w > 0.0)
-        }
-        let all = || {
-            parts
-                .iter()
-                .enumerate()
-                .flat_map(|(p, fbs)| fbs.iter().enumerate().map(move |(i, fb)| (p, i, fb)))
-        };
-        // Per-record lists of (part, index in it, weight), in feedback order (CSR).
-        let mut start = vec![0usize; n + 1];
-        for (_, _, fb) in all() {
-            entries(fb, n).for_each(|(l, _)| start[l + 1] += 1);
-        }
-        for l in 0..n {
-            start[l + 1] += start[l];
-        }
-        let mut fill = start.clone();
-        let mut list = vec![(0u32, 0u32, 0.0f32); start[n]];
-        for (p, i, fb) in all() {
-            for (l, w) in entries(fb, n) {
-                list[fill[l]] = (p as u32, i as u32, w);
-                fill[l] += 1;
-            }
-        }
-        let capacity = self.capacity;
+        let arrivals = &mut self.arrivals;
+        arrivals.group(parts, self.records.len());
+        let (capacity, arrivals) = (self.capacity, &self.arrivals);
         self.records.par_iter_mut().enumerate().with_min_len(16).for_each(|(l, record)| {
-            for &(p, i, weight) in &list[start[l]..start[l + 1]] {
+            let list = arrivals.of(l);
+            // One allocation per record and frame: the samples it will keep are known.
+            let keep = (record.kept.len() + list.len()).min(capacity);
+            record.kept.reserve_exact(keep - record.kept.len());
+            for &(p, i, weight) in list {
                 let fb = &parts[p as usize][i as usize];
                 let s = StoredSample { pmf: fb.pmf, cv: fb.cv, inv_pdf: fb.inv_pdf, value: fb.value, weight };
                 record.push(s, l, capacity);
@@ -133,7 +138,54 @@ impl SampleHistory {
     }
 }
 
+impl Arrivals {
+    /// Groups the parts' entries `(record, weight)` by record (a counting sort, stable),
+    /// skipping records out of `0..records` and zero weights.
+    fn group(&mut self, parts: &[&[SampleFeedback]], records: usize) {
+        let n = records;
+        let start = &mut self.start;
+        start.clear();
+        start.resize(n + 1, 0);
+        for fb in parts.iter().flat_map(|fbs| fbs.iter()) {
+            for (l, w) in fb.records() {
+                if l < n && w > 0.0 {
+                    start[l + 1] += 1;
+                }
+            }
+        }
+        for l in 0..n {
+            start[l + 1] += start[l];
+        }
+        // Filled at `start[l]`, which moves to `start[l + 1]`; shifted back after.
+        self.list.clear();
+        self.list.resize(start[n], (0, 0, 0.0));
+        for (p, fbs) in parts.iter().enumerate() {
+            for (i, fb) in fbs.iter().enumerate() {
+                for (l, w) in fb.records() {
+                    if l < n && w > 0.0 {
+                        self.list[start[l]] = (p as u32, i as u32, w);
+                        start[l] += 1;
+                    }
+                }
+            }
+        }
+        start.copy_within(0..n, 1);
+        start[0] = 0;
+    }
+
+    /// Record `l`'s entries.
+    fn of(&self, l: usize) -> &[(u32, u32, f32)] {
+        &self.list[self.start[l]..self.start[l + 1]]
+    }
+}
+
 impl RecordSamples {
+    fn clear(&mut self) {
+        self.kept.clear();
+        self.seen = 0;
+        self.settled = None;
+    }
+
     /// Algorithm R: the first `capacity` samples are kept; arrival `n` then replaces a
     /// uniformly chosen slot with probability `capacity / (n + 1)`.
     fn push(&mut self, s: StoredSample, record: usize, capacity: usize) {

@@ -39,13 +39,15 @@
 // Index loops over the small matrices read as the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+mod sums;
+
 use super::feedback::SampleFeedback;
 use super::history::{SampleHistory, StoredSample};
 use super::{CacheParams, DistributionSet, ImportanceCache, TECHNIQUES};
+use filtrace_core::cpu::isa;
 use rayon::prelude::*;
+use sums::{moments, objectives, MAX_VARS};
 
-/// Variables of one record: α' and β of up to 4 techniques.
-const MAX_VARS: usize = 2 * TECHNIQUES;
 /// Step sizes tried by the backtracking line search, as fractions of the largest step
 /// that keeps 1 % of the way to the barrier's boundary.
 const STEPS: [f64; 10] =
@@ -277,85 +279,6 @@ fn enabled(set: &DistributionSet) -> ([usize; TECHNIQUES], usize) {
     (ts, j)
 }
 
-/// G's sample estimate with its gradient and Hessian over the 2J variables.
-struct Moments {
-    weight: f64,
-    objective: f64,
-    gradient: [f64; MAX_VARS],
-    hessian: [[f64; MAX_VARS]; MAX_VARS],
-}
-
-/// Accumulates G, ∇G, ∇²G at `x` (α' then β of the enabled techniques) over the
-/// weighted samples, normalised by the weight sum:
-/// `∂G/∂α_k = −r² P_k / s²`, `∂G/∂β_k = −2 r Q_k / s`, `∂²G/∂α_k∂α_m = 2 r² P_k P_m / s³`,
-/// `∂²G/∂β_k∂β_m = 2 Q_k Q_m / s`, `∂²G/∂α_k∂β_m = 2 r P_k Q_m / s²`, each times `1/q0`.
-/// The Hessian of a sample is the rank-one `(2/s) u uᵀ` with `u = (r P / s, Q)`: one
-/// division per sample and the upper triangle only, mirrored at the end.
-fn moments(x: &[f64], ts: &[usize], samples: &[StoredSample]) -> Moments {
-    let j = ts.len();
-    let dim = 2 * j;
-    let mut m = Moments {
-        weight: 0.0,
-        objective: 0.0,
-        gradient: [0.0; MAX_VARS],
-        hessian: [[0.0; MAX_VARS]; MAX_VARS],
-    };
-    for fb in samples {
-        let w = fb.weight as f64;
-        m.weight += w;
-        let Some((a, r, s, u)) = residual(x, ts, fb) else { continue };
-        let inv_s = 1.0 / s;
-        let (ar_s, c) = (a * r * inv_s, 2.0 * a * inv_s);
-        m.objective += ar_s * r;
-        for k in 0..j {
-            m.gradient[k] -= ar_s * u[k];
-            m.gradient[j + k] -= 2.0 * ar_s * u[j + k];
-        }
-        for row in 0..dim {
-            let cu = c * u[row];
-            for col in row..dim {
-                m.hessian[row][col] += cu * u[col];
-            }
-        }
-    }
-    for row in 0..dim {
-        for col in 0..row {
-            m.hessian[row][col] = m.hessian[col][row];
-        }
-    }
-    if m.weight > 0.0 {
-        let inv = 1.0 / m.weight;
-        m.objective *= inv;
-        m.gradient.iter_mut().for_each(|g| *g *= inv);
-        m.hessian.iter_mut().flatten().for_each(|h| *h *= inv);
-    }
-    m
-}
-
-/// One sample at `x`: its importance weight `a = w / q0`, residual `r`, mixture `s` and
-/// `u = (r P / s, Q)`; `None` when it cannot enter G (s ≤ 0, non-finite values).
-#[inline]
-fn residual(x: &[f64], ts: &[usize], fb: &StoredSample) -> Option<(f64, f64, f64, [f64; MAX_VARS])> {
-    let j = ts.len();
-    let mut u = [0.0f64; MAX_VARS];
-    let (mut s, mut predicted) = (0.0f64, 0.0f64);
-    for (k, &t) in ts.iter().enumerate() {
-        let (p, q) = (fb.pmf[t] as f64, fb.cv[t] as f64);
-        s += x[k] * p;
-        predicted += x[j + k] * q;
-        u[k] = p;
-        u[j + k] = q;
-    }
-    let r = fb.value as f64 - predicted;
-    let a = fb.weight as f64 * fb.inv_pdf as f64;
-    if !(s > 0.0 && a.is_finite() && r.is_finite()) {
-        return None;
-    }
-    let r_s = r / s;
-    u[..j].iter_mut().for_each(|p| *p *= r_s);
-    Some((a, r, s, u))
-}
-
 /// The effective sample count `(Σ w)² / Σ w²` of a record's samples.
 fn effective_count(samples: &[StoredSample]) -> f64 {
     let (sum, sum_sq) = samples.iter().fold((0.0f64, 0.0f64), |(a, b), fb| {
@@ -410,7 +333,8 @@ pub fn newton_step(
         return keep(0.0);
     }
     let eps: Vec<f64> = ts.iter().map(|&t| opt.min_alpha[t] as f64).collect();
-    let m = moments(&x[..dim], ts, samples);
+    let level = isa();
+    let m = moments(level, &x, ts, samples);
     let g0 = m.objective;
     if !(g0 > 0.0 && g0.is_finite() && barrier(&x, &eps, 1.0).is_finite()) {
         return keep(g0);
@@ -434,10 +358,10 @@ pub fn newton_step(
     let f0 = g0 + barrier(&x, &eps, rho);
     // The full step usually passes near the optimum: try it and its half first, and
     // replay the samples for the shorter steps only when both fail.
-    let mut values = objectives(&trials[..2], dim, ts, samples);
+    let mut values = objectives(level, &trials[..2], ts, samples);
     for (s, &t) in steps.iter().enumerate() {
         if s == values.len() {
-            values.extend(objectives(&trials[s..], dim, ts, samples));
+            values.extend(objectives(level, &trials[s..], ts, samples));
         }
         let f = values[s] + barrier(&trials[s], &eps, rho);
         if f.is_finite() && f <= f0 - ARMIJO * t * decrement && values[s] <= g0 {
@@ -505,27 +429,6 @@ fn add_barrier_derivatives(
             hess[k][n] += rho / (slack_sum * slack_sum);
         }
     }
-}
-
-/// Sampled G at each trial point (same normalisation as [`moments`]).
-fn objectives(trials: &[[f64; MAX_VARS]], dim: usize, ts: &[usize], samples: &[StoredSample]) -> Vec<f64> {
-    let j = dim / 2;
-    let (mut sums, mut weight) = (vec![0.0f64; trials.len()], 0.0f64);
-    for fb in samples {
-        let w = fb.weight;
-        weight += w as f64;
-        let a = w as f64 * fb.inv_pdf as f64;
-        for (x, sum) in trials.iter().zip(sums.iter_mut()) {
-            let s: f64 = (0..j).map(|k| x[k] * fb.pmf[ts[k]] as f64).sum();
-            let r = fb.value as f64 - (0..j).map(|k| x[j + k] * fb.cv[ts[k]] as f64).sum::<f64>();
-            if s > 0.0 && a.is_finite() {
-                *sum += a * r * r / s;
-            } else {
-                *sum = f64::INFINITY;
-            }
-        }
-    }
-    sums.iter().map(|s| if weight > 0.0 { s / weight } else { *s }).collect()
 }
 
 /// Solves `H dx = −g` for the symmetric positive semi-definite `H` by Cholesky, with a

@@ -100,6 +100,8 @@ const NO_DISTANCE: u32 = u32::MAX;
 struct Learning {
     /// This pass's feedback per tile, with the tile's index.
     tiles: Vec<(usize, Vec<SampleFeedback>)>,
+    /// Emptied feedback lists of earlier passes, for the next tiles.
+    spare: Vec<Vec<SampleFeedback>>,
     history: SampleHistory,
     /// The last step's summary and the milliseconds spent optimising this frame.
     last: OptimizeStats,
@@ -251,8 +253,12 @@ impl Integrator for VplIntegrator {
             .as_ref()
             .map_or(0, |c| c.records().len());
         let capacity = self.settings.cache.optimizer.history;
-        *self.learning.get_mut().unwrap_or_else(PoisonError::into_inner) =
-            Learning { history: SampleHistory::new(records, capacity), ..Learning::default() };
+        let learning = self.learning.get_mut().unwrap_or_else(PoisonError::into_inner);
+        // The history's and the feedback's memory serve the next frame too.
+        let (mut history, spare) =
+            (std::mem::take(&mut learning.history), std::mem::take(&mut learning.spare));
+        history.reset(records, capacity);
+        *learning = Learning { history, spare, ..Learning::default() };
     }
 
     fn li(
@@ -272,7 +278,12 @@ impl Integrator for VplIntegrator {
     /// for `cache_distance`.
     fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
         let learn = self.learns();
-        let mut feedback = Vec::new();
+        let mut feedback = match learn {
+            true => {
+                self.learning.lock().unwrap_or_else(PoisonError::into_inner).spare.pop().unwrap_or_default()
+            }
+            false => Vec::new(),
+        };
         // `trace_tile` takes the pixels in order, each pixel's samples in a row.
         let per_pixel = (tile.end - tile.first).max(1) as usize;
         let mut calls = 0usize;
@@ -304,19 +315,23 @@ impl Integrator for VplIntegrator {
         }
         let mut learning = self.learning.lock().unwrap_or_else(PoisonError::into_inner);
         let mut tiles = std::mem::take(&mut learning.tiles);
-        if !pass.finished {
-            return;
+        if pass.finished {
+            let t = Instant::now();
+            tiles.sort_unstable_by_key(|&(index, _)| index);
+            let parts: Vec<&[SampleFeedback]> = tiles.iter().map(|(_, fb)| fb.as_slice()).collect();
+            learning.history.add_parts(&parts);
+            let mut cache = self.frame.cache.write().unwrap_or_else(PoisonError::into_inner);
+            if let Some(cache) = cache.as_mut() {
+                learning.last = cache.optimize_pass(&mut learning.history);
+                learning.passes += 1;
+            }
+            learning.optimisation_ms += t.elapsed().as_secs_f64() * 1e3;
         }
-        let t = Instant::now();
-        tiles.sort_unstable_by_key(|&(index, _)| index);
-        let parts: Vec<&[SampleFeedback]> = tiles.iter().map(|(_, fb)| fb.as_slice()).collect();
-        learning.history.add_parts(&parts);
-        let mut cache = self.frame.cache.write().unwrap_or_else(PoisonError::into_inner);
-        if let Some(cache) = cache.as_mut() {
-            learning.last = cache.optimize_pass(&mut learning.history);
-            learning.passes += 1;
-        }
-        learning.optimisation_ms += t.elapsed().as_secs_f64() * 1e3;
+        // A pass cut short teaches nothing; either way its lists serve the next one.
+        learning.spare.extend(tiles.into_iter().map(|(_, mut fb)| {
+            fb.clear();
+            fb
+        }));
     }
 }
 

@@ -335,7 +335,7 @@ fn accumulated_passes_never_raise_the_estimated_objective_and_converge() {
 }
 
 /// The history keeps every sample up to its capacity, then a uniform subset, the same
-/// for the same feedback order.
+/// for the same feedback order, also after a reset.
 #[test]
 fn history_reservoir_is_bounded_and_deterministic() {
     let fb = |i: usize| SampleFeedback::for_records(&[(i % 3, 0.5)], [0.1; 4], [0.0; 4], 1.0, i as f32);
@@ -347,7 +347,13 @@ fn history_reservoir_is_bounded_and_deterministic() {
         b.add(chunk);
     }
     c.add_parts(&all.chunks(11).collect::<Vec<_>>());
+    // A history reset after another frame (other records, another capacity) is new.
+    let mut d = SampleHistory::new(5, 7);
+    d.add(&all[..200]);
+    d.reset(3, 100);
+    d.add_parts(&all.chunks(13).collect::<Vec<_>>());
     for l in 0..3 {
+        assert_eq!((d.samples(l), d.seen(l)), (a.samples(l), a.seen(l)), "record {l}: reset");
         assert_eq!((a.samples(l).len(), a.seen(l)), (100, 1000));
         assert_eq!(a.samples(l), b.samples(l), "record {l}: pass boundaries change nothing");
         assert_eq!(a.samples(l), c.samples(l), "record {l}: feedback in parts changes nothing");

@@ -136,8 +136,9 @@ pub fn render_vpl_frame(
 /// - the importance cache, twice: the previous frame's stays alive while the next one
 ///   is built from it (its parameters are interpolated); per record three CDFs over the
 ///   VPLs with their coarse index, plus each thread's values of the record it evaluates;
-/// - `optimized` only: each record's sample history and one pass's feedback, twice
-///   (the tiles' and the merged copy at the end of the pass).
+/// - `optimized` only: each record's sample history and one pass's feedback, counted
+///   twice: the tiles' lists (kept from pass to pass) and their grouping by record at the
+///   end of the pass (smaller entries than the feedback's, so an upper bound).
 pub fn frame_memory(
     width: u32,
     height: u32,

@@ -262,9 +262,8 @@ impl KdTree {
         self.search(root, q, k, limit, out)
     }
 
-    /// Depth-first search pruning subtrees whose lower bound
-    /// exceeds `limit`: an upper bound of the k-th distance, lowered to the k-th
-    /// distance found so far. Every point within the final k-th distance is offered to
+    /// Depth-first search pruning subtrees whose lower bound exceeds `limit`: an upper
+    /// bound of the k-th distance, lowered to the k-th distance found so far. Every point within the final k-th distance is offered to
     /// `out` exactly once (its leaf is never pruned), so `out` ends with the k smallest.
     #[inline(always)]
     fn search(&self, root: NodeRef, q: &Query, k: usize, mut limit: f32, out: &mut Nearest) {

@@ -11,10 +11,11 @@
 //!
 //! Layout for lanes: a leaf holds its (up to 8) points in structure-of-arrays form, so
 //! one pass of lane-wise arithmetic gives all their distances, and an inner node holds its
-//! two children's boxes so that one 4-lane pass gives both lower bounds. The lane loops
-//! are plain `f32` arithmetic in the scalar formula's order (Rust never contracts into
-//! FMAs), compiled once for the baseline and once for AVX2 + FMA after
-//! [`filtrace_core::cpu::isa`]: both give the bits of [`cache_distance`].
+//! (up to 4) children's boxes, two levels of the median-split tree, so that one 8-lane
+//! pass gives all their lower bounds. The lane loops are plain `f32` arithmetic in the
+//! scalar formula's order (Rust never contracts into FMAs), compiled once for the
+//! baseline and once for AVX2 + FMA after [`filtrace_core::cpu::isa`]: both give the bits
+//! of [`cache_distance`].
 
 use filtrace_core::cpu::{isa, Isa};
 use filtrace_core::Vec3;
@@ -25,9 +26,22 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub const MAX_NEIGHBOURS: usize = 4;
 /// Points per kd-tree leaf: one 8-lane block (the median split leaves 4 to 8).
 const LEAF_SIZE: usize = 8;
+/// Children per inner node.
+const WIDTH: usize = 4;
+/// Lanes of an inner node's boxes: the children's position boxes, then their normal ones.
+const BOX_LANES: usize = 2 * WIDTH;
 /// Lower bounds are shrunk by this factor: the exact distances are computed another way
 /// (rounding).
 const BOUND_SLACK: f32 = 1.0 - 1e-5;
+
+/// A subtree: `index` into the inner nodes, `LEAF_BIT | index` into the leaves, or
+/// `EMPTY` (an unused child slot).
+type NodeRef = u32;
+const LEAF_BIT: NodeRef = 1 << 31;
+const EMPTY: NodeRef = NodeRef::MAX;
+/// Entries of the search's stack: each node pushes at most `WIDTH - 1` more than it pops
+/// and a tree over at most 2³¹ points is at most 15 nodes deep.
+const STACK: usize = 64;
 
 /// Ids of built trees (see `KdTree::id`).
 static NEXT_TREE_ID: AtomicU64 = AtomicU64::new(1);
@@ -55,39 +69,39 @@ pub(crate) fn unit_or_z(n: Vec3) -> Vec3 {
     }
 }
 
-/// A subtree: a leaf block or an inner node (indices into their arrays).
-#[derive(Clone, Copy, Debug)]
-enum Child {
-    Leaf(u32),
-    Inner(u32),
-}
-
 /// Up to [`LEAF_SIZE`] points as lanes: rows x, y, z of the positions and of the unit
-/// normals; lanes past `len` repeat lane 0 (computed, never inserted).
+/// normals; lanes past the points repeat lane 0 (computed, never inserted).
 #[derive(Clone, Debug)]
 struct Leaf {
     p: [[f32; LEAF_SIZE]; 3],
     n: [[f32; LEAF_SIZE]; 3],
     ids: [u32; LEAF_SIZE],
-    len: u32,
+    /// Bit `l` set for a lane holding a point.
+    lanes: u32,
 }
 
-/// An inner node: its children's 6D boxes as 4 lanes `(left x, left μn, right x, right
-/// μn)`, row `i` holding axis `i` of each 3D half.
+/// An inner node: its children's 6D boxes as 8 lanes, the position halves of children
+/// 0-3 then their scaled-normal halves, row `i` holding axis `i`. An unused slot has
+/// an empty box (`lo` = ∞, `hi` = −∞: its bound is ∞).
 #[derive(Clone, Debug)]
 struct Inner {
-    lo: [[f32; 4]; 3],
-    hi: [[f32; 4]; 3],
-    children: [Child; 2],
+    lo: [[f32; BOX_LANES]; 3],
+    hi: [[f32; BOX_LANES]; 3],
+    children: [NodeRef; WIDTH],
+    /// Bit `c` set for a used slot (slots `0..` are used first).
+    used: u32,
 }
 
 /// A query in the layouts of the nodes and leaves.
 struct Query {
     position: Vec3,
     normal: Vec3,
-    /// Row `i`: `(x_i, μ n_i, x_i, μ n_i)`, the lanes of [`Inner`].
-    rows: [[f32; 4]; 3],
+    /// Row `i`: `x_i` in the position lanes of [`Inner`], `μ n_i` in the normal ones.
+    rows: [[f32; BOX_LANES]; 3],
 }
+
+/// A 6D box `(position, μ normal)`.
+type Box6 = ([f32; 6], [f32; 6]);
 
 /// A kd-tree over `(position, unit normal)` points answering k-nearest queries under
 /// [`cache_distance`]. Built once per cache; queries are read-only and thread-safe.
@@ -98,7 +112,7 @@ pub struct KdTree {
     id: u64,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
-    root: Option<Child>,
+    root: Option<NodeRef>,
     inner: Vec<Inner>,
     leaves: Vec<Leaf>,
     lambda: f32,
@@ -108,6 +122,7 @@ impl KdTree {
     /// Builds the tree; normals are normalised (zero ones become +z).
     pub fn new(positions: &[Vec3], normals: &[Vec3], lambda: f32) -> Self {
         assert_eq!(positions.len(), normals.len(), "one normal per position");
+        assert!(positions.len() < LEAF_BIT as usize, "at most 2³¹ points");
         let normals: Vec<Vec3> = normals.iter().map(|&n| unit_or_z(n)).collect();
         let mu = lambda * std::f32::consts::FRAC_1_SQRT_2;
         let keys: Vec<[f32; 6]> = positions
@@ -127,7 +142,7 @@ impl KdTree {
         };
         if !positions.is_empty() {
             let mut ids: Vec<u32> = (0..positions.len() as u32).collect();
-            tree.root = Some(tree.build(&mut ids, &keys).0);
+            tree.root = Some(tree.build(&mut ids, &keys));
         }
         tree
     }
@@ -145,45 +160,47 @@ impl KdTree {
         self.lambda
     }
 
-    /// Builds the subtree over `ids`; returns it with its 6D box.
-    fn build(&mut self, ids: &mut [u32], keys: &[[f32; 6]]) -> (Child, [f32; 6], [f32; 6]) {
-        let (mut lo, mut hi) = ([f32::INFINITY; 6], [f32::NEG_INFINITY; 6]);
-        for &i in ids.iter() {
-            for a in 0..6 {
-                lo[a] = lo[a].min(keys[i as usize][a]);
-                hi[a] = hi[a].max(keys[i as usize][a]);
-            }
-        }
+    /// Builds the subtree over `ids`: a leaf, or a node over the (up to four) parts of two
+    /// levels of median splits.
+    fn build(&mut self, ids: &mut [u32], keys: &[[f32; 6]]) -> NodeRef {
         if ids.len() <= LEAF_SIZE {
             self.leaves.push(self.leaf(ids));
-            return (Child::Leaf(self.leaves.len() as u32 - 1), lo, hi);
+            return LEAF_BIT | (self.leaves.len() as u32 - 1);
         }
-        // Split the widest axis at the median (ties by index: deterministic).
-        let axis = (0..6).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-        let mid = ids.len() / 2;
-        ids.select_nth_unstable_by(mid, |&a, &b| {
-            keys[a as usize][axis].total_cmp(&keys[b as usize][axis]).then(a.cmp(&b))
-        });
-        let (left_ids, right_ids) = ids.split_at_mut(mid);
-        let (left, llo, lhi) = self.build(left_ids, keys);
-        let (right, rlo, rhi) = self.build(right_ids, keys);
-        let mut node = Inner { lo: [[0.0; 4]; 3], hi: [[0.0; 4]; 3], children: [left, right] };
-        for (c, (clo, chi)) in [(llo, lhi), (rlo, rhi)].into_iter().enumerate() {
-            for half in 0..2 {
-                for i in 0..3 {
-                    node.lo[i][2 * c + half] = clo[3 * half + i];
-                    node.hi[i][2 * c + half] = chi[3 * half + i];
-                }
+        let (left, right) = median_split(ids, keys);
+        let mut parts: Vec<&mut [u32]> = Vec::with_capacity(WIDTH);
+        for half in [left, right] {
+            if half.len() <= LEAF_SIZE {
+                parts.push(half);
+            } else {
+                let (a, b) = median_split(half, keys);
+                parts.extend([a, b]);
             }
         }
+        let mut node = Inner {
+            lo: [[f32::INFINITY; BOX_LANES]; 3],
+            hi: [[f32::NEG_INFINITY; BOX_LANES]; 3],
+            children: [EMPTY; WIDTH],
+            used: (1 << parts.len()) - 1,
+        };
+        for (c, part) in parts.into_iter().enumerate() {
+            let (lo, hi) = bounding_box(part, keys);
+            for half in 0..2 {
+                for i in 0..3 {
+                    node.lo[i][WIDTH * half + c] = lo[3 * half + i];
+                    node.hi[i][WIDTH * half + c] = hi[3 * half + i];
+                }
+            }
+            node.children[c] = self.build(part, keys);
+        }
         self.inner.push(node);
-        (Child::Inner(self.inner.len() as u32 - 1), lo, hi)
+        self.inner.len() as u32 - 1
     }
 
     /// The lanes of the points `ids` (at most [`LEAF_SIZE`]).
     fn leaf(&self, ids: &[u32]) -> Leaf {
         let mut leaf =
-            Leaf { p: [[0.0; LEAF_SIZE]; 3], n: [[0.0; LEAF_SIZE]; 3], ids: [ids[0]; LEAF_SIZE], len: 0 };
+            Leaf { p: [[0.0; LEAF_SIZE]; 3], n: [[0.0; LEAF_SIZE]; 3], ids: [ids[0]; LEAF_SIZE], lanes: 0 };
         for lane in 0..LEAF_SIZE {
             let i = ids.get(lane).copied().unwrap_or(ids[0]);
             let (p, n) = (self.positions[i as usize], self.normals[i as usize]);
@@ -193,7 +210,7 @@ impl KdTree {
             }
             leaf.ids[lane] = i;
         }
-        leaf.len = ids.len() as u32;
+        leaf.lanes = (1 << ids.len()) - 1;
         leaf
     }
 
@@ -210,25 +227,29 @@ impl KdTree {
     pub fn nearest_with(&self, level: Isa, position: Vec3, normal: Vec3, k: usize) -> Nearest {
         let mut out = Nearest::default();
         let k = k.min(MAX_NEIGHBOURS + 1);
-        if self.is_empty() || k == 0 || !position.is_finite() {
+        let Some(root) = self.root else { return out };
+        if k == 0 || !position.is_finite() {
             return out;
         }
         let normal = unit_or_z(normal);
         let m = normal * (self.lambda * std::f32::consts::FRAC_1_SQRT_2);
-        let p = position;
-        let rows = [[p.x, m.x, p.x, m.x], [p.y, m.y, p.y, m.y], [p.z, m.z, p.z, m.z]];
+        let mut rows = [[0.0; BOX_LANES]; 3];
+        for (row, (x, n)) in rows.iter_mut().zip([(position.x, m.x), (position.y, m.y), (position.z, m.z)]) {
+            row[..WIDTH].fill(x);
+            row[WIDTH..].fill(n);
+        }
         let q = Query { position, normal, rows };
-        self.warm_start(position, normal, k, &mut out);
+        let limit = self.warm_bound(position, normal, k);
         #[cfg(target_arch = "x86_64")]
         if level.has_avx2() && isa().has_avx2() {
             // SAFETY: the CPU runs AVX2 and FMA (checked just above).
-            unsafe { self.search_avx2(&q, k, &mut out) };
+            unsafe { self.search_avx2(root, &q, k, limit, &mut out) };
             LAST_QUERY.with(|last| last.set((self.id, out)));
             return out;
         }
         #[cfg(not(target_arch = "x86_64"))]
         let _ = level;
-        self.search(&q, k, &mut out);
+        self.search(root, &q, k, limit, &mut out);
         LAST_QUERY.with(|last| last.set((self.id, out)));
         out
     }
@@ -237,76 +258,90 @@ impl KdTree {
     /// selection differs).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn search_avx2(&self, q: &Query, k: usize, out: &mut Nearest) {
-        self.search(q, k, out)
+    unsafe fn search_avx2(&self, root: NodeRef, q: &Query, k: usize, limit: f32, out: &mut Nearest) {
+        self.search(root, q, k, limit, out)
     }
 
-    /// Depth-first search, nearer child first, pruning subtrees whose lower bound
-    /// exceeds the current k-th distance.
+    /// Depth-first search pruning subtrees whose lower bound exceeds `limit`: an upper
+    /// bound of the k-th distance, lowered to the k-th distance found so far. Every point within the final k-th distance is offered to
+    /// `out` exactly once (its leaf is never pruned), so `out` ends with the k smallest.
     #[inline(always)]
-    fn search(&self, q: &Query, k: usize, out: &mut Nearest) {
-        let Some(root) = self.root else { return };
+    fn search(&self, root: NodeRef, q: &Query, k: usize, mut limit: f32, out: &mut Nearest) {
         // Entries: subtree and the lower bound of `d` over it (0 for the root).
-        let mut stack = [(root, 0.0f32); 64];
+        let mut stack = [(0 as NodeRef, 0.0f32); STACK];
+        stack[0].0 = root;
         let mut depth = 1;
         while depth > 0 {
             depth -= 1;
-            let (child, bound) = stack[depth];
-            if out.len == k && bound > out.items[k - 1].0 {
+            let (node, bound) = stack[depth];
+            if bound > limit {
                 continue;
             }
-            match child {
-                Child::Leaf(b) => {
-                    let leaf = &self.leaves[b as usize];
-                    let d = leaf_distances(leaf, q, self.lambda);
-                    for (&d, &i) in d.iter().zip(&leaf.ids).take(leaf.len as usize) {
-                        if out.len < k || d <= out.items[k - 1].0 {
-                            out.insert(k, (d, i));
-                        }
-                    }
+            if node & LEAF_BIT != 0 {
+                self.visit_leaf(&self.leaves[(node & !LEAF_BIT) as usize], q, k, limit, out);
+                // NaN never lowers the limit.
+                let kth = out.kth(k);
+                if kth < limit {
+                    limit = kth;
                 }
-                Child::Inner(n) => {
-                    let node = &self.inner[n as usize];
-                    let [dl, dr] = child_bounds(node, &q.rows);
-                    // Push the farther child first so the nearer one is searched first; a
-                    // child already beyond the k-th distance is not pushed at all (NaN: kept).
-                    let [left, right] = node.children;
-                    let (near, far) =
-                        if dl <= dr { ((left, dl), (right, dr)) } else { ((right, dr), (left, dl)) };
-                    let kth = if out.len == k { out.items[k - 1].0 } else { f32::INFINITY };
-                    for child in [far, near] {
-                        if !(child.1 > kth) {
-                            stack[depth] = child;
-                            depth += 1;
-                        }
-                    }
-                }
+                continue;
+            }
+            let node = &self.inner[node as usize];
+            let bounds = child_bounds(node, &q.rows);
+            // Children beyond the limit are not pushed (NaN: kept); the rest in slot order:
+            // the warm limit is close to the final one, so the order changes few visits,
+            // and sorting the children cost more than it saved.
+            let mut open: u32 = 0;
+            for (c, &b) in bounds.iter().enumerate() {
+                open |= ((!(b > limit)) as u32) << c;
+            }
+            open &= node.used;
+            while open != 0 {
+                let c = open.trailing_zeros() as usize;
+                open &= open - 1;
+                stack[depth] = (node.children[c], bounds[c]);
+                depth += 1;
             }
         }
     }
 
-    /// Seeds `out` with the exact distances of the records this thread's previous query
-    /// of this tree found. Neighbouring pixels share most of their records, so the search
-    /// starts with a tight M-th distance and prunes from the root on (about 2-3x fewer
-    /// instructions per query, shading a 256² Cornell frame). The result is unchanged:
-    /// it is the k smallest `(distance, index)` pairs of a set, whatever the insertion
-    /// order ([`Nearest::insert`] skips a point seen twice), so it depends neither on the
-    /// previous query nor on the thread.
-    fn warm_start(&self, position: Vec3, normal: Vec3, k: usize, out: &mut Nearest) {
+    /// Offers the points of `leaf` within `limit` (and any NaN) to `out`.
+    #[inline(always)]
+    fn visit_leaf(&self, leaf: &Leaf, q: &Query, k: usize, limit: f32, out: &mut Nearest) {
+        let d = leaf_distances(leaf, q, self.lambda);
+        let mut near: u32 = 0;
+        for (l, &d) in d.iter().enumerate() {
+            near |= ((!(d > limit)) as u32) << l;
+        }
+        near &= leaf.lanes;
+        while near != 0 {
+            let l = near.trailing_zeros() as usize;
+            near &= near - 1;
+            out.insert(k, (d[l], leaf.ids[l]));
+        }
+    }
+
+    /// An upper bound of the k-th distance: the largest exact distance of `k` records
+    /// this thread's previous query of this tree found (∞ without them, or with a NaN).
+    /// Neighbouring pixels share most of their records, so the search prunes from the
+    /// root on with a bound close to the final one. The result does not depend on it
+    /// (any upper bound gives the same k nearest), so neither on the previous query nor
+    /// on the thread.
+    fn warm_bound(&self, position: Vec3, normal: Vec3, k: usize) -> f32 {
         let (id, previous) = LAST_QUERY.with(Cell::get);
-        if id != self.id {
-            return;
+        if id != self.id || previous.len < k {
+            return f32::INFINITY;
         }
-        for &(_, i) in previous.as_slice() {
-            let d = cache_distance(
-                position,
-                normal,
-                self.positions[i as usize],
-                self.normals[i as usize],
-                self.lambda,
-            );
-            out.insert(k, (d, i));
+        let mut bound = 0.0f32;
+        for &(_, i) in &previous.items[..k] {
+            let (x, n) = (self.positions[i as usize], self.normals[i as usize]);
+            let d = cache_distance(position, normal, x, n, self.lambda);
+            if d.is_nan() {
+                return f32::INFINITY;
+            }
+            bound = bound.max(d);
         }
+        bound
     }
 
     /// Brute-force [`KdTree::nearest`], the reference the tests compare against.
@@ -332,6 +367,29 @@ impl KdTree {
     }
 }
 
+/// Splits `ids` at the median of their widest axis (ties by index: deterministic).
+fn median_split<'a>(ids: &'a mut [u32], keys: &[[f32; 6]]) -> (&'a mut [u32], &'a mut [u32]) {
+    let (lo, hi) = bounding_box(ids, keys);
+    let axis = (0..6).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+    let mid = ids.len() / 2;
+    ids.select_nth_unstable_by(mid, |&a, &b| {
+        keys[a as usize][axis].total_cmp(&keys[b as usize][axis]).then(a.cmp(&b))
+    });
+    ids.split_at_mut(mid)
+}
+
+/// The 6D box of the points `ids`.
+fn bounding_box(ids: &[u32], keys: &[[f32; 6]]) -> Box6 {
+    let (mut lo, mut hi) = ([f32::INFINITY; 6], [f32::NEG_INFINITY; 6]);
+    for &i in ids {
+        for a in 0..6 {
+            lo[a] = lo[a].min(keys[i as usize][a]);
+            hi[a] = hi[a].max(keys[i as usize][a]);
+        }
+    }
+    (lo, hi)
+}
+
 /// [`cache_distance`] from the query to every lane of `leaf`, term by term in its order
 /// (glam's `dot` is `(x x' + y y') + z z'`, `length` its square root), so each lane has
 /// the scalar function's bits.
@@ -348,19 +406,23 @@ fn leaf_distances(leaf: &Leaf, q: &Query, lambda: f32) -> [f32; LEAF_SIZE] {
     d
 }
 
-/// Lower bounds of `d` from the query to the two children of `node`: per child the
-/// distance to its position box plus that to its scaled-normal box.
+/// Lower bounds of `d` from the query to the children of `node`: per child the distance
+/// to its position box plus that to its scaled-normal box (∞ for an unused slot).
 #[inline(always)]
-fn child_bounds(node: &Inner, rows: &[[f32; 4]; 3]) -> [f32; 2] {
-    let mut s = [0.0f32; 4];
+fn child_bounds(node: &Inner, rows: &[[f32; BOX_LANES]; 3]) -> [f32; WIDTH] {
+    let mut s = [0.0f32; BOX_LANES];
     for ((lo, hi), q) in node.lo.iter().zip(&node.hi).zip(rows) {
         for (l, s) in s.iter_mut().enumerate() {
-            let e = (lo[l] - q[l]).max(q[l] - hi[l]).max(0.0);
+            // max(lo − q, q − hi, 0) as selects (plain `maxps`); a NaN gives a smaller
+            // bound than `f32::max` would, never a larger one.
+            let (below, above) = (lo[l] - q[l], q[l] - hi[l]);
+            let e = if below > above { below } else { above };
+            let e = if e > 0.0 { e } else { 0.0 };
             *s += e * e;
         }
     }
     let r = s.map(f32::sqrt);
-    [(r[0] + r[1]) * BOUND_SLACK, (r[2] + r[3]) * BOUND_SLACK]
+    std::array::from_fn(|c| (r[c] + r[WIDTH + c]) * BOUND_SLACK)
 }
 
 /// The result of [`KdTree::nearest`]: up to [`MAX_NEIGHBOURS`] + 1 `(distance, index)`
@@ -376,19 +438,29 @@ impl Nearest {
         &self.items[..self.len]
     }
 
-    /// Inserts `c` unless its point is already there, keeping the `k` smallest.
+    /// The k-th distance, ∞ while there are fewer than `k`.
+    #[inline(always)]
+    fn kth(&self, k: usize) -> f32 {
+        if self.len == k {
+            self.items[k - 1].0
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// Inserts `c` (a point not there yet), keeping the `k` smallest.
     #[inline]
     fn insert(&mut self, k: usize, c: (f32, u32)) {
         let less = |a: &(f32, u32), b: &(f32, u32)| a.0 < b.0 || (a.0 == b.0 && a.1 < b.1);
         if self.len == k && !less(&c, &self.items[k - 1]) {
             return;
         }
-        if self.items[..self.len].iter().any(|a| a.1 == c.1) {
-            return;
+        // Shift every item not less than `c` (NaN included) one place on.
+        let mut at = self.len.min(k - 1);
+        while at > 0 && !less(&self.items[at - 1], &c) {
+            self.items[at] = self.items[at - 1];
+            at -= 1;
         }
-        let at = self.items[..self.len].partition_point(|a| less(a, &c));
-        let end = self.len.min(k - 1);
-        self.items.copy_within(at..end, at + 1);
         self.items[at] = c;
         self.len = (self.len + 1).min(k);
     }
@@ -452,3 +524,6 @@ impl Neighbours {
         (self.len > 0).then(|| self.distances[0])
     }
 }
+
+#[cfg(test)]
+mod tests;

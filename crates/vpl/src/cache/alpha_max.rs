@@ -9,6 +9,8 @@
 //! and that owner's pdf is positive, so the multi-sample estimator
 //! `Σ_s w_s(x_s) f(x_s) / p_s(x_s)` is unbiased.
 
+use super::{CacheParams, Technique, TECHNIQUES};
+
 /// The distribution that owns `x` (the `s` with `w_s(x) = 1`), given the pdfs `p[i]` of
 /// the m distributions at `x` and their confidences `c[i]`, in order. Scans from the back
 /// once: `O(m)`. Returns `p.len() - 1` when nothing else qualifies (the last distribution
@@ -18,7 +20,7 @@ pub fn alpha_max_owner(p: &[f32], c: &[f32]) -> usize {
     debug_assert_eq!(p.len(), c.len());
     let m = p.len();
     // later[s] = max over i > s of c_i p_i, computed back to front.
-    let mut later = [0.0f32; super::TECHNIQUES];
+    let mut later = [0.0f32; TECHNIQUES];
     let mut running = 0.0f32;
     for s in (0..m).rev() {
         later[s] = running;
@@ -36,5 +38,57 @@ pub fn alpha_max_weight(s: usize, p: &[f32], c: &[f32]) -> f32 {
         1.0
     } else {
         0.0
+    }
+}
+
+/// The enabled distributions in α-max order with their confidences `c_i`: what
+/// [`alpha_max_owner`] needs at every shading point, gathered once per point.
+#[derive(Clone, Copy, Debug)]
+pub struct AlphaMaxSet {
+    techniques: [Technique; TECHNIQUES],
+    confidences: [f32; TECHNIQUES],
+    count: usize,
+}
+
+impl AlphaMaxSet {
+    #[inline]
+    pub fn new(config: &CacheParams) -> Self {
+        let mut set = AlphaMaxSet {
+            techniques: [Technique::Uniform; TECHNIQUES],
+            confidences: [0.0; TECHNIQUES],
+            count: 0,
+        };
+        let d = config.distributions;
+        for (t, on) in Technique::ALL.into_iter().zip([d.full, d.unoccluded, d.bounded, true]) {
+            if on {
+                set.techniques[set.count] = t;
+                set.confidences[set.count] = config.confidences[t as usize];
+                set.count += 1;
+            }
+        }
+        set
+    }
+
+    /// The enabled techniques, in order.
+    #[inline]
+    pub fn techniques(&self) -> &[Technique] {
+        &self.techniques[..self.count]
+    }
+
+    /// The pdfs `p_i` of the enabled techniques, in order, from a row indexed by
+    /// `Technique as usize`.
+    #[inline]
+    pub fn gather(&self, row: &[f32; TECHNIQUES]) -> [f32; TECHNIQUES] {
+        let mut p = [0.0; TECHNIQUES];
+        for (p, &t) in p.iter_mut().zip(self.techniques()) {
+            *p = row[t as usize];
+        }
+        p
+    }
+
+    /// [`alpha_max_owner`] of the enabled techniques' pdfs `p` (from [`AlphaMaxSet::gather`]).
+    #[inline]
+    pub fn owner(&self, p: &[f32; TECHNIQUES]) -> usize {
+        alpha_max_owner(&p[..self.count], &self.confidences[..self.count])
     }
 }

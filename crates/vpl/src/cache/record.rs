@@ -73,6 +73,14 @@ impl CacheRecord {
         [full.pmf(j), unoccluded.pmf(j), bounded.pmf(j), self.pmf(Technique::Uniform, j)]
     }
 
+    /// `p_t(j)` of E¹, E², E³ (the CDFs' steps: [`CacheRecord::pmf`]'s values); E⁴'s
+    /// is `1 / vpl_count()` at every `j` below the count.
+    #[inline]
+    pub fn cdf_pmfs(&self, j: usize) -> [f32; 3] {
+        let [full, unoccluded, bounded] = &self.distributions;
+        [full.pmf(j), unoccluded.pmf(j), bounded.pmf(j)]
+    }
+
     /// Draws a VPL from distribution `t` with `u` in `[0, 1)` (binary search of the CDF).
     #[inline]
     pub fn sample(&self, t: Technique, u: f32) -> usize {
@@ -201,10 +209,10 @@ impl VplCdf {
     /// Probability of cell `i` (0 outside `0..count()`).
     #[inline]
     pub fn pmf(&self, i: usize) -> f32 {
-        if i < self.count() {
-            self.cdf[i + 1] - self.cdf[i]
-        } else {
-            0.0
+        // One bounds check: `i + 1 < cdf.len()` is `i < count()`.
+        match self.cdf.get(i..).and_then(|c| c.get(..2)) {
+            Some(&[below, above]) => above - below,
+            _ => 0.0,
         }
     }
 

@@ -16,7 +16,7 @@
 //!   distributions combined by the balance heuristic with the record weights, as
 //!   Georgiev interpolates), weight `w_k^α-max(j_k) / P_k(j_k)`.
 
-use super::alpha_max::alpha_max_owner;
+use super::alpha_max::AlphaMaxSet;
 use super::feedback::SampleFeedback;
 use super::search::Neighbours;
 use super::{ImportanceCache, SamplerKind, Technique, MAX_NEIGHBOURS, TECHNIQUES};
@@ -90,6 +90,21 @@ impl SamplePlan {
         self.draws[self.len as usize] = d;
         self.len += 1;
     }
+}
+
+/// The record of the neighbour slot `u ∈ [0, 1)` falls in, slot `l` with probability
+/// `w_l` (the last one where rounding leaves `u` above the weights' sum).
+#[inline]
+fn pick_record(nb: &Neighbours, u: f32) -> usize {
+    let (mut acc, mut l) = (0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
+    for (slot, w) in nb.iter() {
+        l = slot;
+        acc += w;
+        if u < acc {
+            break;
+        }
+    }
+    l
 }
 
 /// `k` uniform on `0..n` from `u ∈ [0, 1)`, pmf 1/n (Keller's one random VPL).
@@ -209,38 +224,60 @@ impl ImportanceCache {
     }
 
     /// Georgiev's multi-sample estimator: one draw per enabled distribution, kept where
-    /// α-max gives it the sample (draws of weight 0 are left out: no ray for them).
+    /// α-max gives it the sample (draws of weight 0 are left out: no ray for them). All
+    /// draws come first (the random numbers in the order of one draw at a time), then
+    /// one table of `P_i(j)` per distinct drawn VPL, then the owners.
     fn sample_alpha_max(&self, plan: &mut SamplePlan, next: &mut impl FnMut() -> f32) {
         let nb = plan.neighbours;
-        let (mut techniques, mut confidences, mut m) =
-            ([Technique::Uniform; TECHNIQUES], [0.0f32; TECHNIQUES], 0);
-        for t in self.config.distributions.techniques() {
-            (techniques[m], confidences[m]) = (t, self.config.confidences[t as usize]);
-            m += 1;
+        let set = AlphaMaxSet::new(&self.config);
+        let mut drawn = [0usize; MAX_DRAWS];
+        for (j, &t) in drawn.iter_mut().zip(set.techniques()) {
+            let l = pick_record(&nb, next());
+            *j = self.records[l].sample(t, next());
         }
-        let (techniques, confidences) = (&techniques[..m], &confidences[..m]);
-        for (own, &t) in techniques.iter().enumerate() {
-            let (u, mut acc, mut l) = (next(), 0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
-            for (slot, w) in nb.iter() {
-                l = slot;
-                acc += w;
-                if u < acc {
-                    break;
-                }
-            }
-            let j = self.records[l].sample(t, next());
-            let rows = self.neighbour_pmfs(&nb, j);
-            let mut pmfs = [0.0f32; TECHNIQUES];
-            for (i, &ti) in techniques.iter().enumerate() {
-                pmfs[i] = nb.iter().enumerate().map(|(s, (_, w))| w * rows[s][ti as usize]).sum();
-            }
-            if alpha_max_owner(&pmfs[..m], confidences) == own && pmfs[own] > 0.0 {
+        let drawn = &drawn[..set.techniques().len()];
+        let table = self.interpolated_pmfs(&nb, drawn);
+        for (own, (&j, row)) in drawn.iter().zip(&table).enumerate() {
+            let pmfs = set.gather(row);
+            if set.owner(&pmfs) == own && pmfs[own] > 0.0 {
                 let mut d = VplDraw { vpl: j as u32, weight: 1.0 / pmfs[own], ..VplDraw::default() };
-                for (i, &ti) in techniques.iter().enumerate() {
-                    d.interpolated_pmf[ti as usize] = pmfs[i];
+                for (&t, &p) in set.techniques().iter().zip(&pmfs) {
+                    d.interpolated_pmf[t as usize] = p;
                 }
                 plan.push(d);
             }
         }
+    }
+
+    /// `P_t(j) = Σ_l w_l p_lt(j)` of every technique (by `Technique as usize`) at each
+    /// drawn VPL, summed in neighbour order from −0 as `Iterator::sum` does (so with its
+    /// bits). A VPL drawn twice is read once; the uniform term, the same at every VPL
+    /// all neighbours cover, is summed once.
+    fn interpolated_pmfs(&self, nb: &Neighbours, drawn: &[usize]) -> [[f32; TECHNIQUES]; MAX_DRAWS] {
+        // `P_4(j)` is `P_4(0)` at every VPL below each neighbour's count.
+        let covered = nb.iter().map(|(l, _)| self.records[l].vpl_count()).min().unwrap_or(0);
+        let uniform = self.interpolated_uniform(nb, 0);
+        let mut table = [[0.0f32; TECHNIQUES]; MAX_DRAWS];
+        for (k, &j) in drawn.iter().enumerate() {
+            if let Some(i) = drawn[..k].iter().position(|&i| i == j) {
+                table[k] = table[i];
+                continue;
+            }
+            let mut p = [-0.0f32; TECHNIQUES];
+            for (l, w) in nb.iter() {
+                let [full, unoccluded, bounded] = self.records[l].cdf_pmfs(j);
+                p[0] += w * full;
+                p[1] += w * unoccluded;
+                p[2] += w * bounded;
+            }
+            p[3] = if j < covered { uniform } else { self.interpolated_uniform(nb, j) };
+            table[k] = p;
+        }
+        table
+    }
+
+    /// `P_4(j) = Σ_l w_l p_l4(j)` of the uniform technique.
+    fn interpolated_uniform(&self, nb: &Neighbours, j: usize) -> f32 {
+        nb.iter().fold(-0.0, |acc, (l, w)| acc + w * self.records[l].pmf(Technique::Uniform, j))
     }
 }

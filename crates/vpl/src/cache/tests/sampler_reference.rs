@@ -7,15 +7,16 @@ use filtrace_core::rng::SplitMix64;
 use filtrace_core::Rgb;
 
 /// α-max as first written: every draw reads all M × m pmfs, then `alpha_max_owner`.
+/// Also whether a VPL was drawn twice (the fast path reads its pmfs once).
 fn alpha_max_reference(
     cache: &ImportanceCache,
     nb: &Neighbours,
     next: &mut impl FnMut() -> f32,
-) -> Vec<(u32, u32)> {
+) -> (Vec<(u32, u32)>, bool) {
     let config = cache.config();
     let techniques: Vec<Technique> = config.distributions.techniques().collect();
     let confidences: Vec<f32> = techniques.iter().map(|&t| config.confidences[t as usize]).collect();
-    let mut draws = Vec::new();
+    let (mut draws, mut drawn) = (Vec::new(), Vec::new());
     for (own, &t) in techniques.iter().enumerate() {
         let (u, mut acc, mut l) = (next(), 0.0f32, nb.iter().next().map_or(0, |(l, _)| l));
         for (slot, w) in nb.iter() {
@@ -26,6 +27,7 @@ fn alpha_max_reference(
             }
         }
         let j = cache.records()[l].sample(t, next());
+        drawn.push(j);
         let pmfs: Vec<f32> = techniques
             .iter()
             .map(|&ti| nb.iter().map(|(l, w)| w * cache.records()[l].pmf(ti, j)).sum())
@@ -34,15 +36,34 @@ fn alpha_max_reference(
             draws.push((j as u32, (1.0 / pmfs[own]).to_bits()));
         }
     }
-    draws
+    let twice = (1..drawn.len()).any(|k| drawn[..k].contains(&drawn[k]));
+    (draws, twice)
+}
+
+/// The cache with every third record rebuilt over only its first `n` VPLs (a uniform
+/// pmf that is not the same at every VPL: a neighbour's `P_4(j)` falls to 0 above `n`).
+fn with_short_records(mut cache: ImportanceCache, scene: &ToyScene, n: usize) -> ImportanceCache {
+    for (i, r) in cache.records.iter_mut().enumerate().filter(|(i, _)| i % 3 == 0) {
+        let region = Region { radius: r.radius, normal_cone: r.normal_cone };
+        let mut values = RecordValues::default();
+        scene.evaluate_record(&r.point, &region, &mut values);
+        for list in [&mut values.full, &mut values.unoccluded, &mut values.bounded] {
+            list.truncate(n);
+        }
+        *r = CacheRecord::new(r.point, r.radius, r.normal_cone, &values);
+        assert_eq!(r.vpl_count(), n, "record {i}");
+    }
+    cache
 }
 
 fn bits(draws: &[VplDraw]) -> Vec<(u32, u32)> {
     draws.iter().map(|d| (d.vpl, d.weight.to_bits())).collect()
 }
 
-/// The early-out α-max keeps exactly the draws and weights of the full evaluation, for
-/// every set of distributions, M and confidences that make owners change often.
+/// The one-pass α-max (all draws, then one pmf table per distinct VPL) keeps exactly
+/// the draws and weights of the full evaluation one draw at a time, for every set of
+/// distributions, M and confidences that make owners change often, with VPLs drawn
+/// twice and with records that cover fewer VPLs than their neighbours.
 #[test]
 fn alpha_max_matches_the_full_pmf_evaluation() {
     let scene = ToyScene::new(96, 5);
@@ -51,22 +72,25 @@ fn alpha_max_matches_the_full_pmf_evaluation() {
         CacheParams { neighbours: 4, confidences: [0.9, 1.0, 0.7, 1.0], ..CacheParams::default() },
         CacheParams { neighbours: 1, distributions: DistributionSet::thesis(), ..CacheParams::default() },
         CacheParams { neighbours: 3, distributions: DistributionSet::first(2), ..CacheParams::default() },
+        CacheParams { neighbours: 3, ..CacheParams::default() },
     ];
-    let mut kept = 0;
+    let (mut kept, mut twice) = (0, 0);
     for (c, config) in configs.iter().enumerate() {
         let cache = toy_cache(&scene, 30, config);
+        let cache = if c == 4 { with_short_records(cache, &scene, 70) } else { cache };
         let mut rng = SplitMix64::new(c as u64);
         for x in surface_points(300, 11 + c as u64) {
             let nb = cache.neighbours(x.position, x.normal);
             let us: Vec<f32> = (0..2 * TECHNIQUES).map(|_| rng.next_f32()).collect();
             let (mut a, mut b) = (us.iter().copied(), us.iter().copied());
             let plan = cache.sample(SamplerKind::AlphaMax, &nb, &mut || a.next().unwrap_or(0.5));
-            let reference = alpha_max_reference(&cache, &nb, &mut || b.next().unwrap_or(0.5));
+            let (reference, drawn_twice) = alpha_max_reference(&cache, &nb, &mut || b.next().unwrap_or(0.5));
             assert_eq!(bits(plan.draws()), reference, "config {c}, point {x:?}");
             kept += reference.len();
+            twice += drawn_twice as usize;
         }
     }
-    assert!(kept > 300, "draws were kept ({kept})");
+    assert!(kept > 300 && twice > 30, "draws were kept ({kept}), VPLs drawn twice ({twice})");
 }
 
 /// The one-sample balance heuristic as first written: `(draw, weight, offset)` bits.

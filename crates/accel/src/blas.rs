@@ -14,7 +14,7 @@ use crate::triangle::WatertightRay;
 use crate::wide::{self, RayBoxes, WideNode};
 #[cfg(target_arch = "x86_64")]
 use crate::{avx2, avx2_packet};
-use crate::{closer, sah, BuildParams, Simd};
+use crate::{closer, sah, spatial, BuildParams, Simd};
 use filtrace_core::{Aabb, Vec3};
 use filtrace_scene::Mesh;
 use std::collections::HashMap;
@@ -361,7 +361,12 @@ impl<const W: usize> WideBvh<W> {
         tri: impl Fn(usize) -> [Vec3; 3],
         params: &BuildParams,
     ) -> Option<Self> {
-        let (root, order) = sah::build_binary(boxes, params);
+        let (root, order) = if params.spatial_split_budget > 0.0 {
+            let corners: Vec<[Vec3; 3]> = ids.iter().map(|&i| tri(i as usize)).collect();
+            spatial::build_spatial(boxes, &corners, params)
+        } else {
+            sah::build_binary(boxes, params)
+        };
         let root = root?;
         let mut tris = TriPackets { tri_count, bounds: root.bounds(), ..TriPackets::default() };
         let mut leaf = |first: u32, count: u32| {

@@ -107,6 +107,7 @@ mod ray_packet;
 mod refit;
 pub mod sah;
 mod shared_origin;
+mod spatial;
 pub mod testmesh;
 mod top_level;
 mod tri4;

@@ -113,11 +113,13 @@ fn layouts(params: &BuildParams) -> Vec<(String, BuildParams, Simd)> {
 }
 
 /// Random and camera rays agree with brute force for every preset, budget and layout,
-/// with spatial splits alone and on top of pre-splitting; something was split.
+/// with spatial splits alone and on top of pre-splitting; most trees have split
+/// references.
 fn check_scene(scene: &Scene, n: usize, seed: u64, budgets: &[f32]) {
     let mut rays = random_rays(scene, n, seed);
     rays.extend(filtrace_accel::bench::primary_rays(scene, 32, 16));
     let n = rays.len();
+    let (mut split, mut builds) = (0, 0);
     for (preset, params) in BuildParams::presets() {
         for &budget in budgets {
             // Pre-splitting as well only for one preset (the test's time).
@@ -130,13 +132,16 @@ fn check_scene(scene: &Scene, n: usize, seed: u64, budgets: &[f32]) {
                     let name = format!("{preset} spatial {budget} presplit {presplit} {layout} ({stats:?})");
                     accel.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
                     let brute = BruteForce::build_like(scene, &accel);
-                    assert!(stats.references > stats.triangles, "{name}: nothing split");
+                    // (`blas.rs` keeps the plain tree where it is cheaper by the SAH.)
+                    split += (stats.references > stats.triangles) as usize;
+                    builds += 1;
                     let hits = check_rays(&accel, &brute, &rays, &name);
                     assert!(hits > n / 20 && hits < n * 9 / 10, "{name}: {hits} of {n} rays hit");
                 }
             }
         }
     }
+    assert!(2 * split > builds, "only {split} of {builds} trees have split references");
 }
 
 #[test]
@@ -229,13 +234,14 @@ fn presets_do_not_split_spatially() {
 }
 
 /// The SAH cost of the suite's shared meshes with spatial splits (budget 0.3) is not
-/// above the cost without, and the trees agree with brute force.
+/// above the cost without (`blas.rs` keeps the cheaper tree), and is lower on the engine,
+/// whose large triangles overlap; the trees agree with brute force.
 #[test]
 #[ignore = "slow: builds the bunny and the engine with and without spatial splits"]
 fn spatial_splits_do_not_raise_the_sah_cost_of_shared_meshes() {
-    for rel in ["scenes/bunny/bunny_lowres.obj"] {
+    for rel in ["scenes/bunny/bunny.obj", "scenes/gltf/2CylinderEngine.glb"] {
         let Some(path) = shared_path(rel) else { continue };
-        let scene = single(testmesh::read_obj(&path).unwrap_or_else(|e| panic!("{e}")));
+        let scene = filtrace_scene::load(&path).unwrap_or_else(|e| panic!("{rel}: {e}"));
         for simd in kernels() {
             let build =
                 |budget: f32| SceneAccel::build_simd(&scene, &spatial(&BuildParams::default(), budget), simd);
@@ -243,7 +249,10 @@ fn spatial_splits_do_not_raise_the_sah_cost_of_shared_meshes() {
             split.validate().unwrap_or_else(|e| panic!("{rel} {simd:?}: {e}"));
             let (a, b) = (plain.stats().sah_cost, split.stats().sah_cost);
             println!("{rel} {simd:?}: SAH cost {a:.3} without spatial splits, {b:.3} with");
-            assert!(b <= a * 1.001, "{rel} {simd:?}: SAH cost {a} without spatial splits, {b} with");
+            assert!(b <= a, "{rel} {simd:?}: SAH cost {a} without spatial splits, {b} with");
+            if rel.ends_with(".glb") {
+                assert!(b < 0.95 * a, "{rel} {simd:?}: SAH cost {a} without spatial splits, {b} with");
+            }
             let brute = BruteForce::build_like(&scene, &split);
             check_rays(&split, &brute, &random_rays(&scene, 2000, 11), rel);
         }

@@ -254,7 +254,7 @@ fn spatial_splits_do_not_raise_the_sah_cost_of_shared_meshes() {
                 assert!(b < 0.95 * a, "{rel} {simd:?}: SAH cost {a} without spatial splits, {b} with");
             }
             let brute = BruteForce::build_like(&scene, &split);
-            check_rays(&split, &brute, &random_rays(&scene, 2000, 11), rel);
+            check_rays(&split, &brute, &random_rays(&scene, 400, 11), rel);
         }
     }
 }

@@ -15,6 +15,16 @@
 //! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
 
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
+
+const USAGE: &str = "usage: raybench SCENE [--rays N] [--res WxH] [--threads T] [--repeats K]
+  [--bins K] [--leaf N] [--ctrav C] [--flat N] [--block N] [--split B] [--spatial B]
+  [--qnodes N|max] [--json] [--write-obj PATH]
+SCENE: a scene file or built-in name, sphere:N, blades:N or grass:N
+--split B: pre-splitting of long thin triangles, up to B*n extra references
+--spatial B: spatial splits (SBVH), up to B*n extra references (0: off)
+--qnodes N: compressed 8-wide nodes from N triangles (max: never)
+RAYBENCH_STATS=1 prints the BVH statistics (SAH cost, references) to stderr
+";
 use filtrace_scene::builtin::{grass_with, GrassParams};
 use filtrace_scene::Scene;
 use std::io::Write;
@@ -50,12 +60,16 @@ fn main() -> Result<(), String> {
                 opts.build.min_quantized_triangles =
                     if v == "max" { usize::MAX } else { v.parse().map_err(|e| format!("--qnodes: {e}"))? };
             }
+            "--help" | "-h" => {
+                print!("{USAGE}");
+                return Ok(());
+            }
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),
         }
     }
-    let spec = spec.ok_or("usage: raybench SCENE [options]")?;
+    let spec = spec.ok_or(USAGE)?;
     let scene = match spec.strip_prefix("grass:") {
         // `grass:220000` is the suite's grass-1m (`filtrace bench suite`).
         Some(n) => {

@@ -1,18 +1,30 @@
 //! Ray throughput from the command line, until `filtrace bench rays` is wired:
 //!
 //! `cargo run --release -p filtrace-accel --example raybench -- SCENE [--rays N] [--res WxH]
-//!  [--threads T] [--repeats K] [--split B] [--qnodes N] [--json] [--write-obj PATH]`
+//!  [--threads T] [--repeats K] [--split B] [--spatial B] [--qnodes N] [--json] [--write-obj PATH]`
 //!
 //! `SCENE` is a scene file or built-in name (`filtrace_scene::load_scene`) or
 //! `sphere:N` for `testmesh::displaced_sphere(N, 0.1)` (`sphere:150` has 270k triangles)
 //! or `blades:N` for `testmesh::thin_blades(N, 1)` or `grass:N` for the dense grass with
 //! N blades (`grass:220000` is the suite's grass-1m); `--split B` sets
-//! `BuildParams::split_budget` (pre-splitting of long thin triangles), `--qnodes N`
+//! `BuildParams::split_budget` (pre-splitting of long thin triangles), `--spatial B`
+//! `BuildParams::spatial_split_budget` (spatial splits, SBVH; 0.3: up to 30 % more
+//! references), `--qnodes N`
 //! `BuildParams::min_quantized_triangles` (compressed 8-wide nodes from N triangles; `max`:
 //! never).
 //! `--write-obj` writes the world-space triangles as OBJ (for `scripts/embree_bench.py`).
 
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
+
+const USAGE: &str = "usage: raybench SCENE [--rays N] [--res WxH] [--threads T] [--repeats K]
+  [--bins K] [--leaf N] [--ctrav C] [--flat N] [--block N] [--split B] [--spatial B]
+  [--qnodes N|max] [--json] [--write-obj PATH]
+SCENE: a scene file or built-in name, sphere:N, blades:N or grass:N
+--split B: pre-splitting of long thin triangles, up to B*n extra references
+--spatial B: spatial splits (SBVH), up to B*n extra references (0: off)
+--qnodes N: compressed 8-wide nodes from N triangles (max: never)
+RAYBENCH_STATS=1 prints the BVH statistics (SAH cost, references) to stderr
+";
 use filtrace_scene::builtin::{grass_with, GrassParams};
 use filtrace_scene::Scene;
 use std::io::Write;
@@ -40,17 +52,24 @@ fn main() -> Result<(), String> {
             "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,
             "--block" => opts.build.leaf_block = val()?.parse().map_err(|e| format!("--block: {e}"))?,
             "--split" => opts.build.split_budget = val()?.parse().map_err(|e| format!("--split: {e}"))?,
+            "--spatial" => {
+                opts.build.spatial_split_budget = val()?.parse().map_err(|e| format!("--spatial: {e}"))?
+            }
             "--qnodes" => {
                 let v = val()?;
                 opts.build.min_quantized_triangles =
                     if v == "max" { usize::MAX } else { v.parse().map_err(|e| format!("--qnodes: {e}"))? };
+            }
+            "--help" | "-h" => {
+                print!("{USAGE}");
+                return Ok(());
             }
             "--json" => json = true,
             "--write-obj" => write_obj = Some(val()?),
             s => spec = Some(s.to_string()),
         }
     }
-    let spec = spec.ok_or("usage: raybench SCENE [options]")?;
+    let spec = spec.ok_or(USAGE)?;
     let scene = match spec.strip_prefix("grass:") {
         // `grass:220000` is the suite's grass-1m (`filtrace bench suite`).
         Some(n) => {

@@ -14,7 +14,7 @@ use crate::triangle::WatertightRay;
 use crate::wide::{self, RayBoxes, WideNode};
 #[cfg(target_arch = "x86_64")]
 use crate::{avx2, avx2_packet};
-use crate::{closer, sah, BuildParams, Simd};
+use crate::{closer, sah, spatial, BuildParams, Simd};
 use filtrace_core::{Aabb, Vec3};
 use filtrace_scene::Mesh;
 use std::collections::HashMap;
@@ -353,7 +353,10 @@ fn sah_cost_of<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
 impl<const W: usize> WideBvh<W> {
     /// The binned SAH tree over `boxes` (references to triangles `ids`, `tri(id)` the
     /// corners; `tri_count` distinct ones) collapsed to `W`-wide nodes; `None` when the
-    /// builder returns no tree.
+    /// builder returns no tree. With spatial splits ([`BuildParams::spatial_split_budget`])
+    /// the tree with them is kept only if its SAH cost is lower than the one without:
+    /// the builder's choices are greedy per node, and on meshes without overlapping
+    /// boxes (bunny-room, grass) its splits raised the cost of the whole tree by 0.2-2 %.
     fn build(
         ids: &[u32],
         tri_count: usize,
@@ -361,7 +364,22 @@ impl<const W: usize> WideBvh<W> {
         tri: impl Fn(usize) -> [Vec3; 3],
         params: &BuildParams,
     ) -> Option<Self> {
-        let (root, order) = sah::build_binary(boxes, params);
+        let plain = Self::from_tree(sah::build_binary(boxes, params), ids, tri_count, &tri)?;
+        if params.spatial_split_budget <= 0.0 {
+            return Some(plain);
+        }
+        let corners: Vec<[Vec3; 3]> = ids.iter().map(|&i| tri(i as usize)).collect();
+        let split = Self::from_tree(spatial::build_spatial(boxes, &corners, params), ids, tri_count, &tri)?;
+        Some(if sah_cost_of(&split.nodes) < sah_cost_of(&plain.nodes) { split } else { plain })
+    }
+
+    /// The binary tree `root` over references `order` (indices into `ids`) collapsed.
+    fn from_tree(
+        (root, order): (Option<sah::BuildNode>, Vec<u32>),
+        ids: &[u32],
+        tri_count: usize,
+        tri: &impl Fn(usize) -> [Vec3; 3],
+    ) -> Option<Self> {
         let root = root?;
         let mut tris = TriPackets { tri_count, bounds: root.bounds(), ..TriPackets::default() };
         let mut leaf = |first: u32, count: u32| {

@@ -41,7 +41,9 @@
 //! Optionally ([`BuildParams::split_budget`], off in the presets) long thin diagonal
 //! triangles are pre-split before a bottom level is built (`presplit.rs`, Karras & Aila
 //! 2013): the builder gets the boxes of clipped pieces, and a leaf stores each triangle it
-//! references once.
+//! references once. Also optional ([`BuildParams::spatial_split_budget`], off in the
+//! presets): spatial splits in the bottom-level build (`spatial.rs`, SBVH, Stich et al.
+//! 2009), a tree kept only when its SAH cost is lower than the plain one's.
 //! Triangle boxes are padded a little (`packet::padded_boxes`) so that no box culls a hit
 //! the watertight test's rounding puts just outside it. Measurements against Embree 4:
 //! `docs/perf-accel.md` and `docs/performance.md` (1 thread, incoherent closest hits,
@@ -107,6 +109,7 @@ mod ray_packet;
 mod refit;
 pub mod sah;
 mod shared_origin;
+mod spatial;
 pub mod testmesh;
 mod top_level;
 mod tri4;
@@ -180,7 +183,7 @@ pub struct BvhStats {
     pub packets: usize,
     pub triangles: usize,
     /// Packet lanes in use: `triangles` plus the copies of split triangles stored in more
-    /// than one leaf ([`BuildParams::split_budget`]).
+    /// than one leaf ([`BuildParams::split_budget`], [`BuildParams::spatial_split_budget`]).
     pub references: usize,
     pub top_level_nodes: usize,
     /// SAH cost of the wide bottom levels (node visits + packet tests per random ray

@@ -224,15 +224,13 @@ impl Grid {
     /// The part of `tri` inside `region` (`None` when empty).
     fn clip(&self, tri: &[Vec3; 3], region: &Aabb) -> Option<Piece> {
         let poly = clip_triangle(tri, region)?;
-        let tri_box = Aabb::from_points(*tri);
-        let within = |b: Aabb, outer: &Aabb| Aabb { min: b.min.max(outer.min), max: b.max.min(outer.max) };
-        let tight = if poly.overflow {
-            within(*region, &tri_box)
-        } else {
-            within(Aabb::from_points(poly.vertices().iter().copied()), region)
-        };
+        let tight = poly.bounds_within(tri, region);
         let grown = Aabb { min: tight.min - self.slack, max: tight.max + self.slack };
-        Some(Piece { tight, bounds: within(grown, &tri_box), ideal: ideal_area(poly.vertices()) })
+        Some(Piece {
+            tight,
+            bounds: within(grown, &Aabb::from_points(*tri)),
+            ideal: ideal_area(poly.vertices()),
+        })
     }
 }
 
@@ -268,6 +266,16 @@ impl Polygon {
         &self.v[..self.n]
     }
 
+    /// The box of this part of `tri` clipped to `region`, within `region` (the triangle's
+    /// box within it when vertices overflowed).
+    pub(crate) fn bounds_within(&self, tri: &[Vec3; 3], region: &Aabb) -> Aabb {
+        if self.overflow {
+            within(*region, &Aabb::from_points(*tri))
+        } else {
+            within(Aabb::from_points(self.vertices().iter().copied()), region)
+        }
+    }
+
     fn push(&mut self, p: Vec3) {
         if self.n < MAX_VERTICES {
             self.v[self.n] = p;
@@ -297,12 +305,17 @@ impl Polygon {
 
 /// Where the segment `ab` crosses the plane `x[axis] = pos`, computed from its lower end
 /// so that both orientations of an edge give the same point.
-fn crossing(a: Vec3, b: Vec3, axis: usize, pos: f32) -> Vec3 {
+pub(crate) fn crossing(a: Vec3, b: Vec3, axis: usize, pos: f32) -> Vec3 {
     let (a, b) = if a[axis] <= b[axis] { (a, b) } else { (b, a) };
     let t = ((pos - a[axis]) / (b[axis] - a[axis])).clamp(0.0, 1.0);
     let mut p = a + (b - a) * t;
     p[axis] = pos;
     p
+}
+
+/// `b` cut down to `outer`.
+pub(crate) fn within(b: Aabb, outer: &Aabb) -> Aabb {
+    Aabb { min: b.min.max(outer.min), max: b.max.min(outer.max) }
 }
 
 /// The part of triangle `tri` inside the box `region` (`None` when empty).

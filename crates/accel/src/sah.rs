@@ -54,7 +54,26 @@ pub struct BuildParams {
     /// node instead of 256); 0: every BVH, `usize::MAX`: none. The presets use
     /// [`MIN_QUANTIZED_TRIANGLES`].
     pub min_quantized_triangles: usize,
+    /// Spatial splits in bottom levels (`spatial.rs`, Stich et al. 2009, "SBVH"): besides
+    /// object splits, the builder may cut a node's triangles by a plane, a triangle
+    /// straddling it then referenced from both children, up to `spatial_split_budget * n`
+    /// extra references to the `n` references of the mesh; the split tree is kept only
+    /// where its SAH cost is lower than the plain one's. Pays on overlapping triangles
+    /// (engine: -12..-20 % closest-hit instructions), nothing on grass and bunny-room, for
+    /// 2.4-4.3x the build (`docs/perf-accel.md` "Stop 18"). 0 turns it off (the presets);
+    /// [`BuildParams::default`] takes it from the environment variable
+    /// [`SPATIAL_SPLITS_ENV`] when set, for measuring whole renders.
+    pub spatial_split_budget: f32,
 }
+
+/// Environment variable that sets [`BuildParams::spatial_split_budget`] of
+/// [`BuildParams::default`] (e.g. `FILTRACE_SPATIAL_SPLITS=0.3`): a measurement knob for
+/// `filtrace bench suite` and renders; unset, empty or not a number: 0.
+pub const SPATIAL_SPLITS_ENV: &str = "FILTRACE_SPATIAL_SPLITS";
+
+/// Extra references the presets allow for spatial splits: none (see `docs/perf-accel.md`
+/// "Stop 18").
+const SPATIAL_SPLIT_BUDGET: f32 = 0.0;
 
 /// Extra references the presets allow for split triangles (a fraction of the triangles):
 /// none. On the suite's meshes (grass, engine, bunny-room, bunny, teapot) splitting with a
@@ -85,6 +104,7 @@ impl BuildParams {
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
+            spatial_split_budget: SPATIAL_SPLIT_BUDGET,
         }
     }
 
@@ -100,6 +120,7 @@ impl BuildParams {
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
+            spatial_split_budget: SPATIAL_SPLIT_BUDGET,
         }
     }
 
@@ -115,6 +136,7 @@ impl BuildParams {
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
+            spatial_split_budget: SPATIAL_SPLIT_BUDGET,
         }
     }
 
@@ -129,8 +151,12 @@ impl BuildParams {
 }
 
 impl Default for BuildParams {
+    /// [`BuildParams::balanced`], with spatial splits from [`SPATIAL_SPLITS_ENV`] if set.
     fn default() -> Self {
-        Self::balanced()
+        let budget = std::env::var(SPATIAL_SPLITS_ENV).ok().and_then(|v| v.trim().parse::<f32>().ok());
+        let spatial_split_budget =
+            budget.filter(|b| b.is_finite() && *b > 0.0).unwrap_or(SPATIAL_SPLIT_BUDGET);
+        Self { spatial_split_budget, ..Self::balanced() }
     }
 }
 
@@ -172,11 +198,94 @@ struct Ctx<'a> {
     bins: usize,
 }
 
-/// The best split found by binning: axis, last bin on the left, its SAH cost.
-struct Split {
-    axis: usize,
-    bin: usize,
-    cost: f32,
+/// The best split found by binning: axis, last bin on the left, its SAH cost (the sum of
+/// `SA(child) * blocks(child)`, not yet divided by the node's area).
+pub(crate) struct Split {
+    pub axis: usize,
+    pub bin: usize,
+    pub cost: f32,
+}
+
+/// Bin of coordinate `c` among `bins` equal bins from `lo`, `scale = bins / extent`.
+#[inline]
+pub(crate) fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
+    (((c - lo) * scale) as usize).min(bins - 1)
+}
+
+/// Bins `(box, centroid)` items by centroid in `k` bins over `cbounds` on every axis and
+/// sweeps for the cheapest plane (Wald 2007, sec. 3); `blocks(n)` is the cost of a child
+/// of `n` items.
+pub(crate) fn best_object_split(
+    items: impl Iterator<Item = (Aabb, Vec3)> + Clone,
+    cbounds: &Aabb,
+    k: usize,
+    blocks: impl Fn(u32) -> f32,
+) -> Option<Split> {
+    let extent = cbounds.extent();
+    let mut best: Option<Split> = None;
+    let mut bin_box = [Aabb::EMPTY; 64];
+    let mut bin_count = [0u32; 64];
+    for axis in 0..3 {
+        if extent[axis] <= 0.0 {
+            continue;
+        }
+        let lo = cbounds.min[axis];
+        let scale = k as f32 / extent[axis];
+        bin_box[..k].fill(Aabb::EMPTY);
+        bin_count[..k].fill(0);
+        for (b, c) in items.clone() {
+            let j = bin_of(c[axis], lo, scale, k);
+            bin_box[j] = bin_box[j].union(b);
+            bin_count[j] += 1;
+        }
+        if let Some((bin, cost)) =
+            sweep(&bin_box[..k], &bin_count[..k], &bin_count[..k], &blocks, |_, _| true)
+        {
+            if best.as_ref().is_none_or(|b| cost < b.cost) {
+                best = Some(Split { axis, bin, cost });
+            }
+        }
+    }
+    best
+}
+
+/// The cheapest plane between bins: `(last bin on the left, cost)`. A child left of the
+/// plane after bin `j` holds `enter[0..=j]` items, one right of it `exit[j+1..]` (equal
+/// counts for object bins; entries and exits of references for spatial bins).
+/// Planes where `fits(left count, right count)` is false are skipped.
+pub(crate) fn sweep(
+    bin_box: &[Aabb],
+    enter: &[u32],
+    exit: &[u32],
+    blocks: impl Fn(u32) -> f32,
+    fits: impl Fn(u32, u32) -> bool,
+) -> Option<(usize, f32)> {
+    let k = bin_box.len();
+    let mut right_area = [0f32; 64];
+    let mut right_count = [0u32; 64];
+    // Sweep from the right: area and count of bins (j+1)..k.
+    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    for j in (1..k).rev() {
+        acc = acc.union(bin_box[j]);
+        cnt += exit[j];
+        right_area[j - 1] = acc.surface_area();
+        right_count[j - 1] = cnt;
+    }
+    // Sweep from the left, evaluating the plane after bin j.
+    let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
+    let mut best: Option<(usize, f32)> = None;
+    for j in 0..k - 1 {
+        acc = acc.union(bin_box[j]);
+        cnt += enter[j];
+        if cnt == 0 || right_count[j] == 0 || !fits(cnt, right_count[j]) {
+            continue;
+        }
+        let cost = acc.surface_area() * blocks(cnt) + right_area[j] * blocks(right_count[j]);
+        if best.is_none_or(|(_, c)| cost < c) {
+            best = Some((j, cost));
+        }
+    }
+    best
 }
 
 impl Ctx<'_> {
@@ -221,61 +330,10 @@ impl Ctx<'_> {
         n.div_ceil(b) as f32
     }
 
-    #[inline]
-    fn bin_of(&self, c: f32, lo: f32, scale: f32) -> usize {
-        (((c - lo) * scale) as usize).min(self.bins - 1)
-    }
-
     /// Bins the centroids on every axis and sweeps for the cheapest plane (Wald 2007, sec. 3).
     fn find_split(&self, prims: &[u32], cbounds: &Aabb) -> Option<Split> {
-        let k = self.bins;
-        let extent = cbounds.extent();
-        let mut best: Option<Split> = None;
-        let mut bin_box = [Aabb::EMPTY; 64];
-        let mut bin_count = [0u32; 64];
-        let mut right_area = [0f32; 64];
-        let mut right_count = [0u32; 64];
-        for axis in 0..3 {
-            if extent[axis] <= 0.0 {
-                continue;
-            }
-            let lo = cbounds.min[axis];
-            let scale = k as f32 / extent[axis];
-            bin_box[..k].fill(Aabb::EMPTY);
-            bin_count[..k].fill(0);
-            for &i in prims {
-                let b = self.bin_of(self.centroids[i as usize][axis], lo, scale);
-                bin_box[b] = bin_box[b].union(self.boxes[i as usize]);
-                bin_count[b] += 1;
-            }
-            // Sweep from the right: area and count of bins (j+1)..k.
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-            for j in (1..k).rev() {
-                acc = acc.union(bin_box[j]);
-                cnt += bin_count[j];
-                right_area[j - 1] = acc.surface_area();
-                right_count[j - 1] = cnt;
-            }
-            // Sweep from the left, evaluating the plane after bin j.
-            let (mut acc, mut cnt) = (Aabb::EMPTY, 0);
-            for j in 0..k - 1 {
-                acc = acc.union(bin_box[j]);
-                cnt += bin_count[j];
-                if cnt == 0 || right_count[j] == 0 {
-                    continue;
-                }
-                let cost =
-                    acc.surface_area() * self.blocks(cnt) + right_area[j] * self.blocks(right_count[j]);
-                let better = match &best {
-                    Some(b) => cost < b.cost,
-                    None => true,
-                };
-                if better {
-                    best = Some(Split { axis, bin: j, cost });
-                }
-            }
-        }
-        best
+        let items = prims.iter().map(|&i| (self.boxes[i as usize], self.centroids[i as usize]));
+        best_object_split(items, cbounds, self.bins, |n| self.blocks(n))
     }
 
     /// Moves primitives whose centroid falls in bins `0..=split.bin` to the front.
@@ -285,7 +343,7 @@ impl Ctx<'_> {
         let mut i = 0;
         let mut j = prims.len();
         while i < j {
-            if self.bin_of(self.centroids[prims[i] as usize][s.axis], lo, scale) <= s.bin {
+            if bin_of(self.centroids[prims[i] as usize][s.axis], lo, scale, self.bins) <= s.bin {
                 i += 1;
             } else {
                 j -= 1;

@@ -71,7 +71,7 @@ impl Node8Layout for QNode8 {
 mod tests {
     use super::*;
     use crate::avx2::box8;
-    use crate::testmesh::SplitMix64;
+    use crate::testmesh::{grazing_ray, SplitMix64};
     use crate::wide::Node8;
     use filtrace_core::{Aabb, Vec3};
 
@@ -96,20 +96,10 @@ mod tests {
                 node.set_child_box(slot, &Aabb::new(lo, hi));
             }
             let target = node.child_box(k % (1 + k % 8));
-            let corner =
-                Vec3::select(glam::BVec3::new(rnd() < 0.5, rnd() < 0.5, rnd() < 0.5), target.min, target.max);
-            let mut o = Vec3::new(rnd(), rnd(), rnd()) * scale * 12.0 - scale;
-            if k % 4 == 0 {
-                o[k % 3] = corner[k % 3];
-            }
-            let mut d = if k % 2 == 0 { corner - o } else { Vec3::new(rnd(), rnd(), rnd()) - 0.5 };
-            if k % 5 == 0 {
-                d[(k / 5) % 3] = 0.0;
-            }
-            if d == Vec3::ZERO {
+            let box_ = (target.min, target.max);
+            let Some((o, d, t_max)) = grazing_ray(k, &mut rnd, box_, |r| r * scale * 12.0 - scale) else {
                 continue;
-            }
-            let t_max = if k % 7 == 0 { 1.0 } else { f32::INFINITY };
+            };
             let q = QNode8::compress(&node).unwrap();
             // SAFETY: checked `has_avx2()` above.
             let (exact, coarse) = unsafe {

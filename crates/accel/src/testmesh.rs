@@ -226,3 +226,31 @@ pub fn read_obj(path: &std::path::Path) -> Result<Mesh, String> {
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     Ok(mesh_from(&name, positions, indices))
 }
+
+/// The `k`-th ray of the box-test tests' grazing cycle for the box `lo..hi`: aimed at a
+/// random corner (even `k`) or in a random direction, with its origin moved onto that
+/// corner's face plane (every 4th), a zero direction component (every 5th) and `t_max = 1`
+/// (every 7th, else infinity). `origin` maps a random point of `[0, 1)^3` to the origin.
+/// Returns `(origin, direction, t_max)`, `None` when the direction came out zero.
+#[cfg(test)]
+pub(crate) fn grazing_ray(
+    k: usize,
+    rnd: &mut impl FnMut() -> f32,
+    (lo, hi): (Vec3, Vec3),
+    origin: impl FnOnce(Vec3) -> Vec3,
+) -> Option<(Vec3, Vec3, f32)> {
+    let corner = Vec3::select(glam::BVec3::new(rnd() < 0.5, rnd() < 0.5, rnd() < 0.5), lo, hi);
+    let mut o = origin(Vec3::new(rnd(), rnd(), rnd()));
+    if k.is_multiple_of(4) {
+        o[k % 3] = corner[k % 3];
+    }
+    let mut d = if k.is_multiple_of(2) { corner - o } else { Vec3::new(rnd(), rnd(), rnd()) - 0.5 };
+    if k.is_multiple_of(5) {
+        d[(k / 5) % 3] = 0.0;
+    }
+    if d == Vec3::ZERO {
+        return None;
+    }
+    let t_max = if k.is_multiple_of(7) { 1.0 } else { f32::INFINITY };
+    Some((o, d, t_max))
+}

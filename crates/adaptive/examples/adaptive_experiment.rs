@@ -24,7 +24,7 @@ use std::time::Instant;
 use filtrace_adaptive::{AdaptiveParams, ImportanceParams, Mode, SampleCounts};
 use filtrace_core::Image;
 use filtrace_pipeline::{
-    adaptive as pa, FilterChoice, FilteredRenderer, NoFilter, PipelineSettings, RenderSource,
+    adaptive as pa, FilterChoice, FilteredRenderer, IndirectFilter, NoFilter, PipelineSettings, RenderSource,
 };
 use filtrace_render::{RenderSettings, Renderer};
 
@@ -40,6 +40,13 @@ struct Args {
     radius: usize,
     filters: Vec<String>,
     out: PathBuf,
+}
+
+impl Args {
+    /// Width and height of the frames in pixels.
+    fn size(&self) -> (usize, usize) {
+        (self.width as usize, self.height as usize)
+    }
 }
 
 fn parse() -> Result<Args, String> {
@@ -169,187 +176,17 @@ fn main() {
     }
 }
 
+/// method -> filter -> per-seed errors.
+type Results = BTreeMap<String, BTreeMap<String, Vec<Errors>>>;
+
+/// The seed-0 filtered images, by (method, filter).
+type Kept = BTreeMap<(String, String), Image>;
+
 fn run(a: &Args) -> Result<(), String> {
-    let (w, h) = (a.width as usize, a.height as usize);
-    let n = w * h;
     let mut all = BTreeMap::new();
     let mut summary: BTreeMap<String, f64> = BTreeMap::new();
     for scene in &a.scenes {
-        let dir = a.out.join(scene);
-        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-        let mut p = pipeline(scene, a, 0)?;
-        let scale = p.source().scene_scale();
-
-        // Reference: many paths per guide ray, an unrelated seed.
-        let t = Instant::now();
-        // Two independent halves: their mean is the reference, and E|R1 - R2|² / 4 is the
-        // variance of that mean, the noise floor every MSE below contains.
-        let mut halves = Vec::new();
-        for seed in [0x0005_eed0_f2ef_u64, 0x0005_eed0_f2f0] {
-            let mut st = p.settings().clone();
-            st.seed = seed;
-            p.set_settings(st).map_err(|e| e.to_string())?;
-            let counts = vec![a.ref_paths.div_ceil(2); n];
-            let f = p.render_frame_with_counts(Some(&counts)).map_err(|e| e.to_string())?;
-            halves.push(f.images.indirect_map.clone());
-        }
-        let mut reference = halves[0].clone();
-        for (r, b) in reference.data_mut().iter_mut().zip(halves[1].data()) {
-            *r = 0.5 * (*r + b);
-        }
-        let ref_noise = sq_error(&halves[0], &halves[1]).iter().sum::<f64>() / n as f64 / 4.0;
-        eprintln!(
-            "{scene}: reference {} paths/px in {:.1} s, noise floor (MSE) {ref_noise:.3e}",
-            a.ref_paths,
-            t.elapsed().as_secs_f64()
-        );
-        save(&dir, "reference.png", &reference);
-
-        // Adaptive plans (the guide rays go through pixel centres: one plan per `min`).
-        let mut plans = Vec::new();
-        for &min in &a.mins {
-            let params = AdaptiveParams {
-                importance: ImportanceParams::paper().with_radius(a.radius),
-                budget_spp: a.budget,
-                min_spp: min,
-                mode: Mode::Exact,
-            };
-            let plan = pa::plan(p.source(), p.settings(), &params).map_err(|e| e.to_string())?;
-            assert_eq!(plan.counts.total(), a.budget as u64 * n as u64);
-            eprintln!(
-                "{scene}: min {min}: counts {}..{}, plan {:.1} ms (G-buffer pre-pass {:.1} ms)",
-                plan.counts.min(),
-                plan.counts.max(),
-                plan.plan_ms,
-                plan.prepass_ms
-            );
-            save(&dir, &format!("importance_r{}.png", a.radius), &plan.importance);
-            let cmax = plan.counts.max().max(1) as f64;
-            let cvals: Vec<f64> = plan.counts.counts().iter().map(|&c| c as f64).collect();
-            save(&dir, &format!("counts_min{min}.png"), &heat(&cvals, w, h, cmax));
-            plans.push((min, plan));
-        }
-        // "Important" pixels: the top 20% by importance (ties included).
-        let imp = plans[0].1.importance.data();
-        let mut sorted: Vec<f32> = imp.to_vec();
-        sorted.sort_by(|x, y| y.total_cmp(x));
-        let cut = sorted[n / 5];
-        let important: Vec<bool> = imp.iter().map(|&v| v > cut).collect();
-
-        let mut filters = Vec::new();
-        for f in &a.filters {
-            filters.push((f.clone(), FilterChoice::named(f).build(Some(scale))?));
-        }
-
-        // method -> filter -> per-seed errors
-        let mut res: BTreeMap<String, BTreeMap<String, Vec<Errors>>> = BTreeMap::new();
-        let mut methods: Vec<(String, SampleCounts)> =
-            vec![(format!("uniform{}", a.budget), SampleCounts::uniform(w, h, a.budget))];
-        for (min, plan) in &plans {
-            methods.push((format!("adaptive_min{min}"), plan.counts.clone()));
-        }
-        let mut kept: BTreeMap<(String, String), Image> = BTreeMap::new();
-        for seed in 0..a.seeds {
-            let mut st = p.settings().clone();
-            st.seed = seed + 1;
-            p.set_settings(st).map_err(|e| e.to_string())?;
-            for (name, counts) in &methods {
-                let t = Instant::now();
-                let frame =
-                    p.render_frame_with_counts(Some(counts.counts())).map_err(|e| e.to_string())?.clone();
-                let noisy = &frame.images.indirect_map;
-                let trace_s = t.elapsed().as_secs_f64();
-                res.entry(name.clone())
-                    .or_default()
-                    .entry("none".into())
-                    .or_default()
-                    .push(errors(noisy, &reference, &important));
-                if seed == 0 {
-                    save(&dir, &format!("{name}_none.png"), noisy);
-                }
-                for (fname, filter) in filters.iter_mut() {
-                    let mut out = Image::new(w, h, 3);
-                    filter.apply(noisy, &frame.images.guide, &mut out)?;
-                    let e = errors(&out, &reference, &important);
-                    if seed == 0 {
-                        save(&dir, &format!("{name}_{fname}.png"), &out);
-                        kept.insert((name.clone(), fname.clone()), out);
-                    }
-                    res.entry(name.clone()).or_default().entry(fname.clone()).or_default().push(e);
-                }
-                eprintln!("{scene}: seed {seed} {name}: traced in {trace_s:.1} s");
-            }
-        }
-
-        // Error maps, one scale per filter: white = 20x the uniform frame's MSE.
-        for (f, _) in &filters {
-            let uni_mse = sq_error(&kept[&(methods[0].0.clone(), f.clone())], &reference).iter().sum::<f64>()
-                / n as f64;
-            for (m, _) in &methods {
-                let se = sq_error(&kept[&(m.clone(), f.clone())], &reference);
-                save(&dir, &format!("{m}_{f}_error.png"), &heat(&se, w, h, 20.0 * uni_mse.max(1e-12)));
-            }
-        }
-
-        // Close-ups: the 32x32 window where the uniform frame, filtered by the first
-        // filter, errs most; the same window of every method, magnified 4x.
-        if let Some((f0, _)) = filters.first() {
-            let size = 32.min(w).min(h);
-            let uni = &kept[&(methods[0].0.clone(), f0.clone())];
-            let se = sq_error(uni, &reference);
-            let (mut best, mut at) = (-1.0, (0, 0));
-            for y0 in (0..=h - size).step_by(4) {
-                for x0 in (0..=w - size).step_by(4) {
-                    let s: f64 =
-                        (y0..y0 + size).map(|y| se[y * w + x0..y * w + x0 + size].iter().sum::<f64>()).sum();
-                    if s > best {
-                        (best, at) = (s, (x0, y0));
-                    }
-                }
-            }
-            save(&dir, "closeup_reference.png", &crop(&reference, at.0, at.1, size, 4));
-            for ((m, f), img) in &kept {
-                save(&dir, &format!("closeup_{m}_{f}.png"), &crop(img, at.0, at.1, size, 4));
-            }
-            eprintln!("{scene}: close-up window at {at:?}, {size}x{size}");
-        }
-
-        println!("\n{scene} ({}x{}, budget {} paths/px, {} seeds, reference {} paths/px, noise floor {ref_noise:.2e})\n", w, h, a.budget, a.seeds, a.ref_paths);
-        println!("| method | filter | MSE (mean ± sd over seeds) | MSE − floor | worst 0.1% | MSE top-20% importance | MSE rest |");
-        println!("|---|---|---:|---:|---:|---:|---:|");
-        let mean_of = |v: &[Errors], f: fn(&Errors) -> f64| v.iter().map(f).sum::<f64>() / v.len() as f64;
-        for (method, per_filter) in &res {
-            for (fname, v) in per_filter {
-                let k = v.len() as f64;
-                let m = mean_of(v, |e| e.mse);
-                let sd = (v.iter().map(|e| (e.mse - m).powi(2)).sum::<f64>() / (k - 1.0).max(1.0)).sqrt();
-                println!(
-                    "| {method} | {fname} | {m:.3e} ± {sd:.1e} | {:.3e} | {:.3e} | {:.3e} | {:.3e} |",
-                    m - ref_noise,
-                    mean_of(v, |e| e.outliers),
-                    mean_of(v, |e| e.mse_important),
-                    mean_of(v, |e| e.mse_rest)
-                );
-            }
-        }
-        // Adaptive / uniform ratios, per filter, noise floor removed; per-seed ratios give
-        // the spread (the same seed drives both methods' paths only loosely: counts differ).
-        println!("\n| filter | method | MSE ratio vs uniform (floor removed) | per-seed ratios | worst-0.1% ratio |");
-        println!("|---|---|---:|---|---:|");
-        let uni = &res[&methods[0].0];
-        for (method, _) in methods.iter().skip(1) {
-            for (fname, v) in &res[method] {
-                let u = &uni[fname];
-                let r = (mean_of(v, |e| e.mse) - ref_noise) / (mean_of(u, |e| e.mse) - ref_noise);
-                let per: Vec<String> = v
-                    .iter()
-                    .zip(u)
-                    .map(|(a, b)| format!("{:.2}", (a.mse - ref_noise) / (b.mse - ref_noise)))
-                    .collect();
-                let o = mean_of(v, |e| e.outliers) / mean_of(u, |e| e.outliers);
-                println!("| {fname} | {method} | {r:.3} | {} | {o:.2} |", per.join(", "));
-            }
-        }
+        let (ref_noise, res) = run_scene(a, scene)?;
         summary.insert(scene.clone(), ref_noise);
         all.insert(scene.clone(), res);
     }
@@ -358,4 +195,253 @@ fn run(a: &Args) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
     std::fs::write(a.out.join("results.json"), json).map_err(|e| e.to_string())?;
     Ok(())
+}
+
+/// One scene: reference, plans, the traced and filtered frames, their images and tables;
+/// returns the reference's noise floor and the errors.
+fn run_scene(a: &Args, scene: &str) -> Result<(f64, Results), String> {
+    let (w, h) = a.size();
+    let dir = a.out.join(scene);
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let mut p = pipeline(scene, a, 0)?;
+    let scale = p.source().scene_scale();
+    let (reference, ref_noise) = reference_map(a, scene, &mut p, &dir)?;
+    let plans = adaptive_plans(a, scene, &p, &dir)?;
+    let important = most_important(&plans[0].1.importance);
+    let mut filters = Vec::new();
+    for f in &a.filters {
+        filters.push((f.clone(), FilterChoice::named(f).build(Some(scale))?));
+    }
+    let mut methods: Vec<(String, SampleCounts)> =
+        vec![(format!("uniform{}", a.budget), SampleCounts::uniform(w, h, a.budget))];
+    for (min, plan) in &plans {
+        methods.push((format!("adaptive_min{min}"), plan.counts.clone()));
+    }
+    let truth = Truth { reference: &reference, important: &important };
+    let (res, kept) = trace_and_filter(a, scene, &mut p, &dir, &methods, &mut filters, &truth)?;
+    let method_names: Vec<String> = methods.iter().map(|(m, _)| m.clone()).collect();
+    let filter_names: Vec<String> = filters.iter().map(|(f, _)| f.clone()).collect();
+    save_error_maps(a, &dir, &kept, &method_names, &filter_names, &reference);
+    if let Some(f0) = filter_names.first() {
+        save_closeups(a, scene, &dir, &kept, &kept[&(method_names[0].clone(), f0.clone())], &reference);
+    }
+    print_tables(a, scene, &res, &method_names, ref_noise);
+    Ok((ref_noise, res))
+}
+
+/// Reference: many paths per guide ray, unrelated seeds. Two independent halves: their
+/// mean is the reference, and E|R1 - R2|² / 4 is the variance of that mean, the noise floor
+/// every MSE contains. Returns the reference and that floor.
+fn reference_map(
+    a: &Args,
+    scene: &str,
+    p: &mut FilteredRenderer<RenderSource, NoFilter>,
+    dir: &Path,
+) -> Result<(Image, f64), String> {
+    let (w, h) = a.size();
+    let n = w * h;
+    let t = Instant::now();
+    let mut halves = Vec::new();
+    for seed in [0x0005_eed0_f2ef_u64, 0x0005_eed0_f2f0] {
+        let mut st = p.settings().clone();
+        st.seed = seed;
+        p.set_settings(st).map_err(|e| e.to_string())?;
+        let counts = vec![a.ref_paths.div_ceil(2); n];
+        let f = p.render_frame_with_counts(Some(&counts)).map_err(|e| e.to_string())?;
+        halves.push(f.images.indirect_map.clone());
+    }
+    let mut reference = halves[0].clone();
+    for (r, b) in reference.data_mut().iter_mut().zip(halves[1].data()) {
+        *r = 0.5 * (*r + b);
+    }
+    let ref_noise = sq_error(&halves[0], &halves[1]).iter().sum::<f64>() / n as f64 / 4.0;
+    eprintln!(
+        "{scene}: reference {} paths/px in {:.1} s, noise floor (MSE) {ref_noise:.3e}",
+        a.ref_paths,
+        t.elapsed().as_secs_f64()
+    );
+    save(dir, "reference.png", &reference);
+    Ok((reference, ref_noise))
+}
+
+/// Adaptive plans, one per `--min` (the guide rays go through pixel centres, so the plans
+/// do not depend on the seed); saves the importance and the count maps.
+fn adaptive_plans(
+    a: &Args,
+    scene: &str,
+    p: &FilteredRenderer<RenderSource, NoFilter>,
+    dir: &Path,
+) -> Result<Vec<(u32, pa::AdaptivePlan)>, String> {
+    let (w, h) = a.size();
+    let mut plans = Vec::new();
+    for &min in &a.mins {
+        let params = AdaptiveParams {
+            importance: ImportanceParams::paper().with_radius(a.radius),
+            budget_spp: a.budget,
+            min_spp: min,
+            mode: Mode::Exact,
+        };
+        let plan = pa::plan(p.source(), p.settings(), &params).map_err(|e| e.to_string())?;
+        assert_eq!(plan.counts.total(), a.budget as u64 * (w * h) as u64);
+        eprintln!(
+            "{scene}: min {min}: counts {}..{}, plan {:.1} ms (G-buffer pre-pass {:.1} ms)",
+            plan.counts.min(),
+            plan.counts.max(),
+            plan.plan_ms,
+            plan.prepass_ms
+        );
+        save(dir, &format!("importance_r{}.png", a.radius), &plan.importance);
+        let cmax = plan.counts.max().max(1) as f64;
+        let cvals: Vec<f64> = plan.counts.counts().iter().map(|&c| c as f64).collect();
+        save(dir, &format!("counts_min{min}.png"), &heat(&cvals, w, h, cmax));
+        plans.push((min, plan));
+    }
+    Ok(plans)
+}
+
+/// "Important" pixels: the top 20% by importance (ties included).
+fn most_important(importance: &Image) -> Vec<bool> {
+    let imp = importance.data();
+    let mut sorted: Vec<f32> = imp.to_vec();
+    sorted.sort_by(|x, y| y.total_cmp(x));
+    let cut = sorted[imp.len() / 5];
+    imp.iter().map(|&v| v > cut).collect()
+}
+
+/// What every frame is compared with: the reference and the important pixels.
+struct Truth<'a> {
+    reference: &'a Image,
+    important: &'a [bool],
+}
+
+/// Per seed and method: traces a frame with the method's counts and filters it with every
+/// filter; returns the errors and the seed-0 filtered images (all images of seed 0 saved).
+fn trace_and_filter(
+    a: &Args,
+    scene: &str,
+    p: &mut FilteredRenderer<RenderSource, NoFilter>,
+    dir: &Path,
+    methods: &[(String, SampleCounts)],
+    filters: &mut [(String, Box<dyn IndirectFilter>)],
+    truth: &Truth,
+) -> Result<(Results, Kept), String> {
+    let (w, h) = a.size();
+    let mut res = Results::new();
+    let mut kept = Kept::new();
+    for seed in 0..a.seeds {
+        let mut st = p.settings().clone();
+        st.seed = seed + 1;
+        p.set_settings(st).map_err(|e| e.to_string())?;
+        for (name, counts) in methods {
+            let t = Instant::now();
+            let frame = p.render_frame_with_counts(Some(counts.counts())).map_err(|e| e.to_string())?.clone();
+            let noisy = &frame.images.indirect_map;
+            let trace_s = t.elapsed().as_secs_f64();
+            let errors_of = |img: &Image| errors(img, truth.reference, truth.important);
+            res.entry(name.clone()).or_default().entry("none".into()).or_default().push(errors_of(noisy));
+            if seed == 0 {
+                save(dir, &format!("{name}_none.png"), noisy);
+            }
+            for (fname, filter) in filters.iter_mut() {
+                let mut out = Image::new(w, h, 3);
+                filter.apply(noisy, &frame.images.guide, &mut out)?;
+                let e = errors_of(&out);
+                if seed == 0 {
+                    save(dir, &format!("{name}_{fname}.png"), &out);
+                    kept.insert((name.clone(), fname.clone()), out);
+                }
+                res.entry(name.clone()).or_default().entry(fname.clone()).or_default().push(e);
+            }
+            eprintln!("{scene}: seed {seed} {name}: traced in {trace_s:.1} s");
+        }
+    }
+    Ok((res, kept))
+}
+
+/// Error maps, one scale per filter: white = 20x the uniform frame's MSE (`methods[0]`).
+fn save_error_maps(
+    a: &Args,
+    dir: &Path,
+    kept: &Kept,
+    methods: &[String],
+    filters: &[String],
+    reference: &Image,
+) {
+    let (w, h) = a.size();
+    let sq_error_of = |m: &String, f: &String| sq_error(&kept[&(m.clone(), f.clone())], reference);
+    for f in filters {
+        let uni_mse = sq_error_of(&methods[0], f).iter().sum::<f64>() / (w * h) as f64;
+        for m in methods {
+            let se = sq_error_of(m, f);
+            save(dir, &format!("{m}_{f}_error.png"), &heat(&se, w, h, 20.0 * uni_mse.max(1e-12)));
+        }
+    }
+}
+
+/// Close-ups: the 32x32 window where `worst` (the uniform frame, filtered by the first
+/// filter) errs most; the same window of the reference and every kept image, magnified 4x.
+fn save_closeups(a: &Args, scene: &str, dir: &Path, kept: &Kept, worst: &Image, reference: &Image) {
+    let (w, h) = a.size();
+    let size = 32.min(w).min(h);
+    let se = sq_error(worst, reference);
+    let (mut best, mut at) = (-1.0, (0, 0));
+    for y0 in (0..=h - size).step_by(4) {
+        for x0 in (0..=w - size).step_by(4) {
+            let s: f64 = (y0..y0 + size).map(|y| se[y * w + x0..y * w + x0 + size].iter().sum::<f64>()).sum();
+            if s > best {
+                (best, at) = (s, (x0, y0));
+            }
+        }
+    }
+    save(dir, "closeup_reference.png", &crop(reference, at.0, at.1, size, 4));
+    for ((m, f), img) in kept {
+        save(dir, &format!("closeup_{m}_{f}.png"), &crop(img, at.0, at.1, size, 4));
+    }
+    eprintln!("{scene}: close-up window at {at:?}, {size}x{size}");
+}
+
+fn mean_of(v: &[Errors], f: fn(&Errors) -> f64) -> f64 {
+    v.iter().map(f).sum::<f64>() / v.len() as f64
+}
+
+/// The scene's two tables: errors per method and filter, and adaptive / uniform ratios.
+/// `methods[0]` is the uniform method.
+fn print_tables(a: &Args, scene: &str, res: &Results, methods: &[String], ref_noise: f64) {
+    println!("\n{scene} ({}x{}, budget {} paths/px, {} seeds, reference {} paths/px, noise floor {ref_noise:.2e})\n", a.width, a.height, a.budget, a.seeds, a.ref_paths);
+    println!("| method | filter | MSE (mean ± sd over seeds) | MSE − floor | worst 0.1% | MSE top-20% importance | MSE rest |");
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    for (method, per_filter) in res {
+        for (fname, v) in per_filter {
+            let k = v.len() as f64;
+            let m = mean_of(v, |e| e.mse);
+            let sd = (v.iter().map(|e| (e.mse - m).powi(2)).sum::<f64>() / (k - 1.0).max(1.0)).sqrt();
+            println!(
+                "| {method} | {fname} | {m:.3e} ± {sd:.1e} | {:.3e} | {:.3e} | {:.3e} | {:.3e} |",
+                m - ref_noise,
+                mean_of(v, |e| e.outliers),
+                mean_of(v, |e| e.mse_important),
+                mean_of(v, |e| e.mse_rest)
+            );
+        }
+    }
+    // Adaptive / uniform ratios, per filter, noise floor removed; per-seed ratios give
+    // the spread (the same seed drives both methods' paths only loosely: counts differ).
+    println!(
+        "\n| filter | method | MSE ratio vs uniform (floor removed) | per-seed ratios | worst-0.1% ratio |"
+    );
+    println!("|---|---|---:|---|---:|");
+    let uni = &res[&methods[0]];
+    for method in methods.iter().skip(1) {
+        for (fname, v) in &res[method] {
+            let u = &uni[fname];
+            let r = (mean_of(v, |e| e.mse) - ref_noise) / (mean_of(u, |e| e.mse) - ref_noise);
+            let per: Vec<String> = v
+                .iter()
+                .zip(u)
+                .map(|(a, b)| format!("{:.2}", (a.mse - ref_noise) / (b.mse - ref_noise)))
+                .collect();
+            let o = mean_of(v, |e| e.outliers) / mean_of(u, |e| e.outliers);
+            println!("| {fname} | {method} | {r:.3} | {} | {o:.2} |", per.join(", "));
+        }
+    }
 }

@@ -335,122 +335,163 @@ impl Guides {
     ) -> Result<Self, DenoiseError> {
         g.validate(width, height)?;
         debug_assert!(stride >= width);
-        let n = stride * height;
-        let w = width.max(1);
-        // Whole rows per work item, about PAR_CHUNK pixels.
-        let rows = (PAR_CHUNK / w).max(1);
-        let mut normal = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
-        let mut surface = Buf::uninit(n);
-        let [n0, n1, n2] = &mut normal;
-        if n > 0 {
-            n0.par_chunks_mut(rows * stride)
-                .zip(n1.par_chunks_mut(rows * stride))
-                .zip(n2.par_chunks_mut(rows * stride))
-                .zip(surface.par_chunks_mut(rows * stride))
-                .zip(g.normal.data().par_chunks(3 * w * rows))
-                .for_each(|((((a, b), c), s), src)| {
-                    for (r, src) in src.chunks_exact(3 * w).enumerate() {
-                        let o = r * stride;
-                        for (i, px) in src.chunks_exact(3).enumerate() {
-                            let ok = is_surface(px);
-                            let inv = if ok {
-                                1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt()
-                            } else {
-                                0.0
-                            };
-                            a[o + i] = px[0] * inv;
-                            b[o + i] = px[1] * inv;
-                            c[o + i] = px[2] * inv;
-                            s[o + i] = if ok { 1.0 } else { 0.0 };
-                        }
-                        for pl in [&mut *a, &mut *b, &mut *c, &mut *s] {
-                            pl[o + width..o + stride].fill(0.0);
-                        }
-                    }
-                });
-        }
+        let (mut normal, mut surface) = unit_normal_planes(g, width, height, stride);
         // Invalid depths and positions make background too (see `surface_at`).
-        if n > 0 && (g.depth.is_some() || g.position.is_some()) {
-            let [n0, n1, n2] = &mut normal;
-            n0.par_chunks_mut(stride)
-                .zip(n1.par_chunks_mut(stride))
-                .zip(n2.par_chunks_mut(stride))
-                .zip(surface.par_chunks_mut(stride))
-                .enumerate()
-                .for_each(|(y, (((a, b), c), s))| {
-                    for x in 0..width {
-                        if s[x] != 0.0 && !surface_at(g, y * width + x) {
-                            (a[x], b[x], c[x], s[x]) = (0.0, 0.0, 0.0, 0.0);
-                        }
-                    }
-                });
+        if g.depth.is_some() || g.position.is_some() {
+            clear_far_surfaces(g, width, stride, &mut normal, &mut surface);
         }
-        let surface_px = |i: usize| surface_at(g, i);
-        let limit = |v: f32| v.clamp(-GUIDE_LIMIT, GUIDE_LIMIT);
-        // The depth plane is only needed as the position.
-        let depth = g.depth.as_ref().filter(|_| g.position.is_none()).map(|d| {
-            let scale = depth_scale(g, d);
-            let mut b = Buf::uninit(n);
-            if n > 0 {
-                b.par_chunks_mut(stride).zip(d.data().par_chunks(w)).for_each(|(o, src)| {
-                    for (o, v) in o.iter_mut().zip(src) {
-                        *o = if is_valid_distance(*v) { limit(v / scale) } else { 0.0 };
-                    }
-                    o[width..].fill(0.0);
-                });
-            }
-            b
-        });
-        let position = if let Some(p) = &g.position {
-            let scale = g.scene_scale.unwrap_or_else(|| {
-                let mut lo = [f32::INFINITY; 3];
-                let mut hi = [f32::NEG_INFINITY; 3];
-                for (i, px) in p.data().chunks_exact(3).enumerate() {
-                    if surface_px(i) {
-                        for k in 0..3 {
-                            lo[k] = lo[k].min(px[k]);
-                            hi[k] = hi[k].max(px[k]);
-                        }
-                    }
-                }
-                let d2: f32 = (0..3).map(|k| (hi[k] - lo[k]).max(0.0).powi(2)).sum();
-                let d = d2.sqrt();
-                if d.is_finite() && d > 0.0 {
-                    d
-                } else {
-                    1.0
-                }
-            });
-            // A multiply per value instead of a division (3 divisions per pixel were ~2% of
-            // À-Trous 5x3 at 1080p, perf).
-            let inv_scale = 1.0 / scale;
-            let mut planes = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
-            let [a, b, c] = &mut planes;
-            // Background keeps its (finite) positions: it is only ever compared with background.
-            if n > 0 {
-                a.par_chunks_mut(rows * stride)
-                    .zip(b.par_chunks_mut(rows * stride))
-                    .zip(c.par_chunks_mut(rows * stride))
-                    .zip(p.data().par_chunks(3 * w * rows))
-                    .for_each(|(((a, b), c), src)| {
-                        for (r, src) in src.chunks_exact(3 * w).enumerate() {
-                            let o = r * stride;
-                            for (i, px) in src.chunks_exact(3).enumerate() {
-                                let ok = px.iter().all(|v| is_valid_distance(*v));
-                                a[o + i] = if ok { limit(px[0] * inv_scale) } else { 0.0 };
-                                b[o + i] = if ok { limit(px[1] * inv_scale) } else { 0.0 };
-                                c[o + i] = if ok { limit(px[2] * inv_scale) } else { 0.0 };
-                            }
-                            for pl in [&mut *a, &mut *b, &mut *c] {
-                                pl[o + width..o + stride].fill(0.0);
-                            }
-                        }
-                    });
-            }
-            Some(planes)
-        } else {
-            depth.map(|d| [d, Buf::zeros(n), Buf::zeros(n)])
+        let position = match &g.position {
+            Some(p) => Some(position_planes(g, p, width, height, stride)),
+            // The depth plane is only needed as the position.
+            None => g.depth.as_ref().map(|d| {
+                let n = stride * height;
+                [depth_plane(g, d, width, height, stride), Buf::zeros(n), Buf::zeros(n)]
+            }),
         };
         Ok(Self { width, height, stride, normal, position, surface })
     }
+}
+
+/// Whole image rows per parallel work item of the guide conversions (about [`PAR_CHUNK`]
+/// pixels).
+fn rows_per_item(width: usize) -> usize {
+    (PAR_CHUNK / width.max(1)).max(1)
+}
+
+/// A scaled guide value clamped to [`GUIDE_LIMIT`].
+fn limit(v: f32) -> f32 {
+    v.clamp(-GUIDE_LIMIT, GUIDE_LIMIT)
+}
+
+/// The unit normals of `g` in planes of `stride` values per row, and the surface plane (1
+/// where the normal is set, [`is_surface`]); background and padding are 0.
+fn unit_normal_planes(g: &GBuffer, width: usize, height: usize, stride: usize) -> (Planes3, Buf) {
+    let n = stride * height;
+    let w = width.max(1);
+    let rows = rows_per_item(width);
+    let mut normal = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+    let mut surface = Buf::uninit(n);
+    if n == 0 {
+        return (normal, surface);
+    }
+    let [n0, n1, n2] = &mut normal;
+    n0.par_chunks_mut(rows * stride)
+        .zip(n1.par_chunks_mut(rows * stride))
+        .zip(n2.par_chunks_mut(rows * stride))
+        .zip(surface.par_chunks_mut(rows * stride))
+        .zip(g.normal.data().par_chunks(3 * w * rows))
+        .for_each(|((((a, b), c), s), src)| {
+            for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                let o = r * stride;
+                for (i, px) in src.chunks_exact(3).enumerate() {
+                    let ok = is_surface(px);
+                    let inv =
+                        if ok { 1.0 / (px[0] * px[0] + px[1] * px[1] + px[2] * px[2]).sqrt() } else { 0.0 };
+                    a[o + i] = px[0] * inv;
+                    b[o + i] = px[1] * inv;
+                    c[o + i] = px[2] * inv;
+                    s[o + i] = if ok { 1.0 } else { 0.0 };
+                }
+                for pl in [&mut *a, &mut *b, &mut *c, &mut *s] {
+                    pl[o + width..o + stride].fill(0.0);
+                }
+            }
+        });
+    (normal, surface)
+}
+
+/// Turns the surface pixels whose depth or position is invalid ([`surface_at`]) into
+/// background: normal and surface 0.
+fn clear_far_surfaces(g: &GBuffer, width: usize, stride: usize, normal: &mut Planes3, surface: &mut Buf) {
+    if surface.is_empty() {
+        return;
+    }
+    let [n0, n1, n2] = normal;
+    n0.par_chunks_mut(stride)
+        .zip(n1.par_chunks_mut(stride))
+        .zip(n2.par_chunks_mut(stride))
+        .zip(surface.par_chunks_mut(stride))
+        .enumerate()
+        .for_each(|(y, (((a, b), c), s))| {
+            for x in 0..width {
+                if s[x] != 0.0 && !surface_at(g, y * width + x) {
+                    (a[x], b[x], c[x], s[x]) = (0.0, 0.0, 0.0, 0.0);
+                }
+            }
+        });
+}
+
+/// The depth `d` divided by [`depth_scale`] (invalid depths 0) in a plane of `stride`
+/// values per row.
+fn depth_plane(g: &GBuffer, d: &Image, width: usize, height: usize, stride: usize) -> Buf {
+    let scale = depth_scale(g, d);
+    let mut b = Buf::uninit(stride * height);
+    if !b.is_empty() {
+        b.par_chunks_mut(stride).zip(d.data().par_chunks(width.max(1))).for_each(|(o, src)| {
+            for (o, v) in o.iter_mut().zip(src) {
+                *o = if is_valid_distance(*v) { limit(v / scale) } else { 0.0 };
+            }
+            o[width..].fill(0.0);
+        });
+    }
+    b
+}
+
+/// The position scale of `g`: its `scene_scale` when set, else the diagonal of the surface
+/// points' box (1 when that is 0 or not finite).
+fn position_scale(g: &GBuffer, p: &Image) -> f32 {
+    g.scene_scale.unwrap_or_else(|| {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for (i, px) in p.data().chunks_exact(3).enumerate() {
+            if surface_at(g, i) {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(px[k]);
+                    hi[k] = hi[k].max(px[k]);
+                }
+            }
+        }
+        let d2: f32 = (0..3).map(|k| (hi[k] - lo[k]).max(0.0).powi(2)).sum();
+        let d = d2.sqrt();
+        if d.is_finite() && d > 0.0 {
+            d
+        } else {
+            1.0
+        }
+    })
+}
+
+/// The positions `p` divided by [`position_scale`] (invalid ones 0) in planes of `stride`
+/// values per row. Background keeps its (finite) positions: it is only ever compared with
+/// background.
+fn position_planes(g: &GBuffer, p: &Image, width: usize, height: usize, stride: usize) -> Planes3 {
+    let n = stride * height;
+    let (w, rows) = (width.max(1), rows_per_item(width));
+    // A multiply per value instead of a division (3 divisions per pixel were ~2% of
+    // À-Trous 5x3 at 1080p, perf).
+    let inv_scale = 1.0 / position_scale(g, p);
+    let mut planes = [Buf::uninit(n), Buf::uninit(n), Buf::uninit(n)];
+    if n == 0 {
+        return planes;
+    }
+    let [a, b, c] = &mut planes;
+    a.par_chunks_mut(rows * stride)
+        .zip(b.par_chunks_mut(rows * stride))
+        .zip(c.par_chunks_mut(rows * stride))
+        .zip(p.data().par_chunks(3 * w * rows))
+        .for_each(|(((a, b), c), src)| {
+            for (r, src) in src.chunks_exact(3 * w).enumerate() {
+                let o = r * stride;
+                for (i, px) in src.chunks_exact(3).enumerate() {
+                    let ok = px.iter().all(|v| is_valid_distance(*v));
+                    a[o + i] = if ok { limit(px[0] * inv_scale) } else { 0.0 };
+                    b[o + i] = if ok { limit(px[1] * inv_scale) } else { 0.0 };
+                    c[o + i] = if ok { limit(px[2] * inv_scale) } else { 0.0 };
+                }
+                for pl in [&mut *a, &mut *b, &mut *c] {
+                    pl[o + width..o + stride].fill(0.0);
+                }
+            }
+        });
+    planes
 }

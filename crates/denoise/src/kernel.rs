@@ -190,16 +190,20 @@ pub(crate) fn ld3<const B: usize>(s: &[&[f32]; 3], i: usize) -> [[f32; B]; 3] {
     [ld::<B>(s[0], i), ld::<B>(s[1], i), ld::<B>(s[2], i)]
 }
 
+/// Adds `||p - q||^2 * inv` to the exponents `e` of `B` pixels; `first`: sets them instead
+/// (the first term on); shared with the symmetric À-Trous pass.
 #[inline(always)]
-fn dist2_acc<const B: usize, const F: bool>(
+pub(crate) fn dist2_acc<const B: usize, const F: bool>(
     e: &mut [f32; B],
     p: &[[f32; B]; 3],
     q: &[[f32; B]; 3],
     inv: f32,
+    first: bool,
 ) {
     for i in 0..B {
         let (d0, d1, d2) = (p[0][i] - q[0][i], p[1][i] - q[1][i], p[2][i] - q[2][i]);
-        e[i] = madd::<F>(madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0)), inv, e[i]);
+        let d = madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0));
+        e[i] = if first { d * inv } else { madd::<F>(d, inv, e[i]) };
     }
 }
 
@@ -225,13 +229,13 @@ fn blocks_v<const WC: bool, const WN: bool, const WX: bool, const V: bool, const
             let qc = ld3::<B>(&a.c, q);
             let mut e = [0.0f32; B];
             if WC {
-                dist2_acc::<B, F>(&mut e, &pc, &qc, a.inv[0]);
+                dist2_acc::<B, F>(&mut e, &pc, &qc, a.inv[0], false);
             }
             if WN {
-                dist2_acc::<B, F>(&mut e, &pn, &ld3::<B>(&a.n, q), a.inv[1]);
+                dist2_acc::<B, F>(&mut e, &pn, &ld3::<B>(&a.n, q), a.inv[1], false);
             }
             if WX {
-                dist2_acc::<B, F>(&mut e, &px, &ld3::<B>(&a.x, q), a.inv[2]);
+                dist2_acc::<B, F>(&mut e, &px, &ld3::<B>(&a.x, q), a.inv[2], false);
             }
             let qs = ld::<B>(a.s, q);
             let qv = if V { ld::<B>(a.v.unwrap_or(a.s), q) } else { [0.0; B] };
@@ -367,119 +371,191 @@ pub(crate) fn edge_avoiding_pass(
     terms: RangeTerms,
     dst: &mut Planes3,
 ) {
-    let (w, h) = (g.width, g.height);
-    if w == 0 || h == 0 {
+    let w = g.width;
+    if w == 0 || g.height == 0 {
         return;
     }
-    // Switched-off terms never read their planes: the normals stand in for absent positions.
-    let pos: [&[f32]; 3] = match (&g.position, terms.inv_position) {
-        (Some(p), Some(_)) => [&p[0], &p[1], &p[2]],
-        _ => [&g.normal[0], &g.normal[1], &g.normal[2]],
-    };
-    let flags = (
-        terms.inv_color.is_some(),
-        terms.inv_normal.is_some(),
-        terms.inv_position.is_some() && g.position.is_some(),
-    );
-    let inv =
-        [terms.inv_color.unwrap_or(0.0), terms.inv_normal.unwrap_or(0.0), terms.inv_position.unwrap_or(0.0)];
-    let isa = isa();
-    // Tap extents and flat offsets for the register-blocked interior.
-    let dx_min = taps.iter().map(|t| t.dx).min().unwrap_or(0);
-    let dx_max = taps.iter().map(|t| t.dx).max().unwrap_or(0);
-    let dy_min = taps.iter().map(|t| t.dy).min().unwrap_or(0);
-    let dy_max = taps.iter().map(|t| t.dy).max().unwrap_or(0);
     let offs: Vec<(isize, f32)> = taps.iter().map(|t| (t.dy * w as isize + t.dx, t.h)).collect();
-    let bw = block_width(isa);
-    let blk = BlockArgs {
-        c: [&src[0], &src[1], &src[2]],
-        n: [&g.normal[0], &g.normal[1], &g.normal[2]],
-        x: pos,
-        s: &g.surface,
-        v: valid,
-        offs: &offs,
-        inv,
-    };
+    let pass = RowPass::new(src, valid, g, taps, terms, &offs);
     let [d0, d1, d2] = dst;
     d0.par_chunks_mut(w).zip(d1.par_chunks_mut(w)).zip(d2.par_chunks_mut(w)).enumerate().for_each_init(
         || vec![0.0f32; 4 * TILE],
-        |scratch, (y, ((o0, o1), o2))| {
-            // Interior blocks [fx0, fx1): every tap inside the image, no per-tap clipping.
-            let yi = y as isize;
-            let (mut fx0, mut fx1) = (0usize, 0usize);
-            if yi + dy_min >= 0 && yi + dy_max < h as isize {
-                let a = (-dx_min).max(0) as usize;
-                let b = (w as isize - dx_max.max(0)).max(0) as usize;
-                if b > a {
-                    let nb = (b - a) / bw;
-                    (fx0, fx1) = (a, a + nb * bw);
-                    if nb > 0 {
-                        let mut out = [&mut o0[fx0..fx1], &mut o1[fx0..fx1], &mut o2[fx0..fx1]];
-                        blocks_any(&blk, y * w + fx0, nb, &mut out, flags, isa);
-                    }
-                }
-            }
-            // The rest (borders) by tiles, clipping each tap to the image.
-            let spans = [(0, fx0), (fx1, w)];
-            for t0 in spans.iter().flat_map(|&(r0, r1)| (r0..r1).step_by(TILE).map(move |t0| (t0, r1))) {
-                let (t0, r1) = t0;
-                let t1 = (t0 + TILE).min(r1);
-                let tw = t1 - t0;
-                scratch.fill(0.0);
-                let (s0, rest) = scratch.split_at_mut(TILE);
-                let (s1, rest) = rest.split_at_mut(TILE);
-                let (s2, sw) = rest.split_at_mut(TILE);
-                for t in taps {
-                    let yq = y as isize + t.dy;
-                    if yq < 0 || yq >= h as isize {
-                        continue;
-                    }
-                    // Tile pixels whose neighbour x + dx lies inside the row.
-                    let x0 = (-t.dx).max(t0 as isize) as usize;
-                    let x1 = (w as isize - t.dx).min(t1 as isize);
-                    if x1 <= x0 as isize {
-                        continue;
-                    }
-                    let x1 = x1 as usize;
-                    let p = y * w;
-                    let q = (yq as usize * w) as isize + t.dx;
-                    let (pr, qr) = (p + x0..p + x1, (q + x0 as isize) as usize..(q + x1 as isize) as usize);
-                    let a = RowArgs {
-                        pc: [&src[0][pr.clone()], &src[1][pr.clone()], &src[2][pr.clone()]],
-                        qc: [&src[0][qr.clone()], &src[1][qr.clone()], &src[2][qr.clone()]],
-                        pn: [&g.normal[0][pr.clone()], &g.normal[1][pr.clone()], &g.normal[2][pr.clone()]],
-                        qn: [&g.normal[0][qr.clone()], &g.normal[1][qr.clone()], &g.normal[2][qr.clone()]],
-                        px: [&pos[0][pr.clone()], &pos[1][pr.clone()], &pos[2][pr.clone()]],
-                        qx: [&pos[0][qr.clone()], &pos[1][qr.clone()], &pos[2][qr.clone()]],
-                        ps: &g.surface[pr.clone()],
-                        qs: &g.surface[qr.clone()],
-                        qv: valid.map(|v| &v[qr]),
-                        h: t.h,
-                        inv,
-                    };
-                    let (l0, l1) = (x0 - t0, x1 - t0);
-                    let mut acc = [&mut s0[l0..l1], &mut s1[l0..l1], &mut s2[l0..l1], &mut sw[l0..l1]];
-                    tap_row_any(&a, &mut acc, flags, isa);
-                }
-                // Normalise (eq. 3); a pixel with no contributing tap keeps its own value.
-                let p = y * w;
-                for l in 0..tw {
-                    let x = t0 + l;
-                    // (Weights below 1e-30 count as none: their reciprocal would overflow.)
-                    if sw[l] > 1e-30 {
-                        let inv_w = 1.0 / sw[l];
-                        o0[x] = s0[l] * inv_w;
-                        o1[x] = s1[l] * inv_w;
-                        o2[x] = s2[l] * inv_w;
-                    } else {
-                        o0[x] = src[0][p + x];
-                        o1[x] = src[1][p + x];
-                        o2[x] = src[2][p + x];
-                    }
-                }
-            }
-        },
+        |scratch, (y, ((o0, o1), o2))| pass.row(y, &mut [o0, o1, o2], scratch),
     );
+}
+
+/// What every row of one [`edge_avoiding_pass`] reads.
+struct RowPass<'a> {
+    src: &'a Planes3,
+    valid: Option<&'a [f32]>,
+    g: &'a Guides,
+    taps: &'a [Tap],
+    /// The position planes; the normals stand in when the position term is off.
+    pos: [&'a [f32]; 3],
+    /// Which of the colour, normal and position terms are on.
+    flags: (bool, bool, bool),
+    inv: [f32; 3],
+    isa: Isa,
+    /// Smallest and largest tap offsets in x and in y.
+    dx: (isize, isize),
+    dy: (isize, isize),
+    /// The register-blocked interior's view of the same planes.
+    blk: BlockArgs<'a>,
+}
+
+impl<'a> RowPass<'a> {
+    /// `offs`: each tap's flat offset `dy * width + dx` and weight `h`.
+    fn new(
+        src: &'a Planes3,
+        valid: Option<&'a [f32]>,
+        g: &'a Guides,
+        taps: &'a [Tap],
+        terms: RangeTerms,
+        offs: &'a [(isize, f32)],
+    ) -> Self {
+        // Switched-off terms never read their planes: the normals stand in for absent positions.
+        let pos: [&[f32]; 3] = match (&g.position, terms.inv_position) {
+            (Some(p), Some(_)) => [&p[0], &p[1], &p[2]],
+            _ => [&g.normal[0], &g.normal[1], &g.normal[2]],
+        };
+        let flags = (
+            terms.inv_color.is_some(),
+            terms.inv_normal.is_some(),
+            terms.inv_position.is_some() && g.position.is_some(),
+        );
+        let inv = [
+            terms.inv_color.unwrap_or(0.0),
+            terms.inv_normal.unwrap_or(0.0),
+            terms.inv_position.unwrap_or(0.0),
+        ];
+        let extent = |d: fn(&Tap) -> isize| {
+            (taps.iter().map(d).min().unwrap_or(0), taps.iter().map(d).max().unwrap_or(0))
+        };
+        let blk = BlockArgs {
+            c: [&src[0], &src[1], &src[2]],
+            n: [&g.normal[0], &g.normal[1], &g.normal[2]],
+            x: pos,
+            s: &g.surface,
+            v: valid,
+            offs,
+            inv,
+        };
+        let (dx, dy) = (extent(|t| t.dx), extent(|t| t.dy));
+        Self { src, valid, g, taps, pos, flags, inv, isa: isa(), dx, dy, blk }
+    }
+
+    /// Filters row `y` into `out` (its three planes): the interior by blocks, the borders
+    /// by tiles.
+    #[inline(always)]
+    fn row(&self, y: usize, out: &mut [&mut [f32]; 3], scratch: &mut [f32]) {
+        let (fx0, fx1) = self.interior(y, out);
+        for (r0, r1) in [(0, fx0), (fx1, self.g.width)] {
+            for t0 in (r0..r1).step_by(TILE) {
+                self.border_tile(y, t0, (t0 + TILE).min(r1), out, scratch);
+            }
+        }
+    }
+
+    /// Filters the interior blocks `[fx0, fx1)` of row `y`, where every tap lands inside the
+    /// image (no per-tap clipping); returns that span (empty when there is none).
+    #[inline(always)]
+    fn interior(&self, y: usize, out: &mut [&mut [f32]; 3]) -> (usize, usize) {
+        let (w, h) = (self.g.width, self.g.height);
+        let yi = y as isize;
+        if yi + self.dy.0 < 0 || yi + self.dy.1 >= h as isize {
+            return (0, 0);
+        }
+        let a = (-self.dx.0).max(0) as usize;
+        let b = (w as isize - self.dx.1.max(0)).max(0) as usize;
+        if b <= a {
+            return (0, 0);
+        }
+        let bw = block_width(self.isa);
+        let nb = (b - a) / bw;
+        let (fx0, fx1) = (a, a + nb * bw);
+        if nb > 0 {
+            let [o0, o1, o2] = out;
+            let mut out = [&mut o0[fx0..fx1], &mut o1[fx0..fx1], &mut o2[fx0..fx1]];
+            blocks_any(&self.blk, y * w + fx0, nb, &mut out, self.flags, self.isa);
+        }
+        (fx0, fx1)
+    }
+
+    /// Filters pixels `t0..t1` of row `y`, clipping each tap to the image, with the tile's
+    /// sums in `scratch` (4 planes of [`TILE`]).
+    #[inline(always)]
+    fn border_tile(&self, y: usize, t0: usize, t1: usize, out: &mut [&mut [f32]; 3], scratch: &mut [f32]) {
+        scratch.fill(0.0);
+        let (s0, rest) = scratch.split_at_mut(TILE);
+        let (s1, rest) = rest.split_at_mut(TILE);
+        let (s2, sw) = rest.split_at_mut(TILE);
+        for t in self.taps {
+            self.tap_into_tile(y, t, t0, t1, [&mut *s0, &mut *s1, &mut *s2, &mut *sw]);
+        }
+        self.normalise_tile(y, t0, t1 - t0, [s0, s1, s2, sw], out);
+    }
+
+    /// Adds tap `t` to the sums `acc` of tile `t0..t1` of row `y`, over the tile pixels whose
+    /// neighbour lies inside the image.
+    #[inline(always)]
+    fn tap_into_tile(&self, y: usize, t: &Tap, t0: usize, t1: usize, acc: [&mut [f32]; 4]) {
+        let (w, h) = (self.g.width, self.g.height);
+        let yq = y as isize + t.dy;
+        if yq < 0 || yq >= h as isize {
+            return;
+        }
+        // Tile pixels whose neighbour x + dx lies inside the row.
+        let x0 = (-t.dx).max(t0 as isize) as usize;
+        let x1 = (w as isize - t.dx).min(t1 as isize);
+        if x1 <= x0 as isize {
+            return;
+        }
+        let x1 = x1 as usize;
+        let p = y * w;
+        let q = (yq as usize * w) as isize + t.dx;
+        let (pr, qr) = (p + x0..p + x1, (q + x0 as isize) as usize..(q + x1 as isize) as usize);
+        let (src, nrm, pos) = (self.src, &self.g.normal, &self.pos);
+        let a = RowArgs {
+            pc: [&src[0][pr.clone()], &src[1][pr.clone()], &src[2][pr.clone()]],
+            qc: [&src[0][qr.clone()], &src[1][qr.clone()], &src[2][qr.clone()]],
+            pn: [&nrm[0][pr.clone()], &nrm[1][pr.clone()], &nrm[2][pr.clone()]],
+            qn: [&nrm[0][qr.clone()], &nrm[1][qr.clone()], &nrm[2][qr.clone()]],
+            px: [&pos[0][pr.clone()], &pos[1][pr.clone()], &pos[2][pr.clone()]],
+            qx: [&pos[0][qr.clone()], &pos[1][qr.clone()], &pos[2][qr.clone()]],
+            ps: &self.g.surface[pr.clone()],
+            qs: &self.g.surface[qr.clone()],
+            qv: self.valid.map(|v| &v[qr]),
+            h: t.h,
+            inv: self.inv,
+        };
+        let (l0, l1) = (x0 - t0, x1 - t0);
+        let [s0, s1, s2, sw] = acc;
+        let mut acc = [&mut s0[l0..l1], &mut s1[l0..l1], &mut s2[l0..l1], &mut sw[l0..l1]];
+        tap_row_any(&a, &mut acc, self.flags, self.isa);
+    }
+
+    /// Writes the tile's sums `s` divided by their weight (eq. 3) to pixels `t0..t0 + tw`
+    /// of row `y`; a pixel with no contributing tap keeps its own value.
+    #[inline(always)]
+    fn normalise_tile(&self, y: usize, t0: usize, tw: usize, s: [&mut [f32]; 4], out: &mut [&mut [f32]; 3]) {
+        let [s0, s1, s2, sw] = s;
+        let [o0, o1, o2] = out;
+        let (src, p) = (self.src, y * self.g.width);
+        for l in 0..tw {
+            let x = t0 + l;
+            // (Weights below 1e-30 count as none: their reciprocal would overflow.)
+            if sw[l] > 1e-30 {
+                let inv_w = 1.0 / sw[l];
+                o0[x] = s0[l] * inv_w;
+                o1[x] = s1[l] * inv_w;
+                o2[x] = s2[l] * inv_w;
+            } else {
+                o0[x] = src[0][p + x];
+                o1[x] = src[1][p + x];
+                o2[x] = src[2][p + x];
+            }
+        }
+    }
 }
 
 /// Weights below 2^-100 set to 0: a spatial weight times `exp(-87)` is subnormal, and

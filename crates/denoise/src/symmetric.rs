@@ -25,7 +25,7 @@
 //! segment split, so results do not depend on the thread count.
 
 use crate::chains::{rows_of, segments, PlanesSink, RgbSink, Sink};
-use crate::kernel::{ld, ld3, RangeTerms};
+use crate::kernel::{dist2_acc, ld, ld3, RangeTerms};
 use crate::simd::{isa, madd, scaled_exp_neg, Isa};
 use rayon::prelude::*;
 
@@ -117,21 +117,6 @@ fn centre<const WN: bool, const WX: bool, const B: usize>(a: &LevelInput, p: usi
         n: if WN { ld3::<B>(&a.n, p) } else { zero },
         x: if WX { ld3::<B>(&a.x, p) } else { zero },
         s: ld::<B>(a.s, p),
-    }
-}
-
-#[inline(always)]
-fn dist2_acc<const B: usize, const F: bool>(
-    e: &mut [f32; B],
-    p: &[[f32; B]; 3],
-    q: &[[f32; B]; 3],
-    inv: f32,
-    first: bool,
-) {
-    for i in 0..B {
-        let (d0, d1, d2) = (p[0][i] - q[0][i], p[1][i] - q[1][i], p[2][i] - q[2][i]);
-        let d = madd::<F>(d2, d2, madd::<F>(d1, d1, d0 * d0));
-        e[i] = if first { d * inv } else { madd::<F>(d, inv, e[i]) };
     }
 }
 

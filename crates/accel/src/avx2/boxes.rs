@@ -125,7 +125,7 @@ impl Node8Layout for Node8 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testmesh::SplitMix64;
+    use crate::testmesh::{grazing_ray, SplitMix64};
 
     /// The fused box test never culls a box that the ray touches, checked against an
     /// `f64` slab test on rays that graze boxes: origins on faces, edges and corners,
@@ -160,20 +160,11 @@ mod tests {
             let offset = Vec3::new(rnd(), rnd(), rnd()) * scale * 10.0;
             let lo = offset + Vec3::new(rnd(), rnd(), rnd()) * scale;
             let hi = lo + Vec3::new(rnd(), rnd(), rnd()) * scale;
-            let corner = Vec3::select(glam::BVec3::new(rnd() < 0.5, rnd() < 0.5, rnd() < 0.5), lo, hi);
-            let mut o = lo + (hi - lo) * Vec3::new(rnd(), rnd(), rnd()) * 3.0 - (hi - lo);
-            // Put the origin on a face plane now and then.
-            if k % 4 == 0 {
-                o[k % 3] = corner[k % 3];
-            }
-            let mut d = if k % 2 == 0 { corner - o } else { Vec3::new(rnd(), rnd(), rnd()) - 0.5 };
-            if k % 5 == 0 {
-                d[(k / 5) % 3] = 0.0;
-            }
-            if d == Vec3::ZERO {
+            let Some((o, d, t_max)) =
+                grazing_ray(k, &mut rnd, (lo, hi), |r| lo + (hi - lo) * r * 3.0 - (hi - lo))
+            else {
                 continue;
-            }
-            let t_max = if k % 7 == 0 { 1.0 } else { f32::INFINITY };
+            };
             let mut node = Node8 {
                 bounds: [
                     [f32::INFINITY; 8],

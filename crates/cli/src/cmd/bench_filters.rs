@@ -13,7 +13,7 @@ use std::time::Instant;
 use filtrace_core::Image;
 use filtrace_denoise::bench_input::synthetic_input;
 use filtrace_denoise::{AtrousParams, BilateralParams, Filter, GBuffer, Guidance, GuidedParams};
-use serde_json::json;
+use serde_json::{json, Value};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -109,83 +109,115 @@ fn check_only(only: &str, no_bilateral: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The measured rows of both tables, and what they were measured at.
+struct Tables {
+    threads: usize,
+    /// Dammertz's resolutions (empty when `--only` skips the table).
+    dammertz_res: Vec<(usize, usize)>,
+    dammertz: Vec<Value>,
+    bauszat_res: (usize, usize),
+    bauszat: Vec<Value>,
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.repeats > 0, "--repeats must be at least 1");
     check_only(args.only.as_deref().unwrap_or(""), args.no_bilateral)?;
     let fixed = args.res.as_deref().map(parse_res).transpose()?;
-    let mut dammertz_res =
-        fixed.map(|r| vec![r]).unwrap_or_else(|| vec![(512, 512), (1024, 1024), (1920, 1080)]);
     let only = args.only.clone().unwrap_or_default();
-    if !"a-trous".contains(only.as_str()) {
-        dammertz_res.clear();
-    }
+    let dammertz_res = match fixed {
+        _ if !"a-trous".contains(only.as_str()) => Vec::new(),
+        Some(r) => vec![r],
+        None => vec![(512, 512), (1024, 1024), (1920, 1080)],
+    };
     let bauszat_res = fixed.unwrap_or((1024, 768));
-    let threads = rayon::current_num_threads();
+    let tables = Tables {
+        threads: rayon::current_num_threads(),
+        dammertz: dammertz_rows(&dammertz_res, args.repeats)?,
+        dammertz_res,
+        bauszat: bauszat_rows(bauszat_res, &args, &only)?,
+        bauszat_res,
+    };
+    let mut out = super::output::stdout();
+    if args.json {
+        write_json(&mut out, &tables, args.repeats)?;
+    } else {
+        write_dammertz_table(&mut out, &tables)?;
+        write_bauszat_table(&mut out, &tables)?;
+    }
+    Ok(out.flush()?)
+}
 
-    // Dammertz Table 2: resolution x iterations x weights.
-    let mut dammertz = Vec::new();
-    for &(w, h) in &dammertz_res {
+/// Dammertz Table 2: resolution x iterations x weights.
+fn dammertz_rows(resolutions: &[(usize, usize)], repeats: usize) -> anyhow::Result<Vec<Value>> {
+    let mut rows = Vec::new();
+    for &(w, h) in resolutions {
         let (color, g) = synthetic_input(w, h);
         for weights in 0..=3 {
             for iterations in [1, 5, 10] {
                 let f = Filter::Atrous(atrous_with_weights(iterations, weights));
-                let (ms, cpu_ms) = time_ms(&f, &color, &g, args.repeats)?;
-                dammertz.push(json!({"width": w, "height": h, "iterations": iterations, "weights": weights,
+                let (ms, cpu_ms) = time_ms(&f, &color, &g, repeats)?;
+                rows.push(json!({"width": w, "height": h, "iterations": iterations, "weights": weights,
                     "ms": ms, "cpu_ms": cpu_ms}));
             }
         }
     }
+    Ok(rows)
+}
 
-    // Bauszat Table 2 at one resolution.
-    let (w, h) = bauszat_res;
+/// Bauszat Table 2 at one resolution: the rows of the filters `only` selects.
+fn bauszat_rows((w, h): (usize, usize), args: &Args, only: &str) -> anyhow::Result<Vec<Value>> {
     let (color, g) = synthetic_input(w, h);
-    let mut bauszat = Vec::new();
-    if !args.no_bilateral && "cross-bilateral".contains(only.as_str()) {
+    let mut rows = Vec::new();
+    let mut row = |filter: &str, setting: String, f: Filter, repeats: usize| -> anyhow::Result<()> {
+        let (ms, cpu_ms) = time_ms(&f, &color, &g, repeats)?;
+        rows.push(json!({"filter": filter, "setting": setting, "ms": ms, "cpu_ms": cpu_ms}));
+        Ok(())
+    };
+    if !args.no_bilateral && "cross-bilateral".contains(only) {
         for radius in [16, 24, 32] {
             let f = Filter::Bilateral(BilateralParams {
                 radius,
                 sigma_spatial: radius as f32 / 2.0,
                 ..BilateralParams::reference()
             });
-            let (ms, cpu_ms) = time_ms(&f, &color, &g, args.repeats.min(2))?;
-            bauszat
-                .push(json!({"filter": "cross-bilateral", "setting": format!("radius {radius}"), "ms": ms,
-                "cpu_ms": cpu_ms}));
+            row("cross-bilateral", format!("radius {radius}"), f, args.repeats.min(2))?;
         }
     }
-    for iterations in [4, 5, 6].into_iter().filter(|_| "a-trous".contains(only.as_str())) {
+    for iterations in [4, 5, 6].into_iter().filter(|_| "a-trous".contains(only)) {
         let f = Filter::Atrous(AtrousParams { iterations, ..AtrousParams::paper() });
-        let (ms, cpu_ms) = time_ms(&f, &color, &g, args.repeats)?;
-        bauszat.push(json!({"filter": "a-trous", "setting": format!("{iterations} iterations"), "ms": ms,
-            "cpu_ms": cpu_ms}));
+        row("a-trous", format!("{iterations} iterations"), f, args.repeats)?;
     }
     let guided_rows = [(Guidance::GreyNormal, 1), (Guidance::Normal, 3), (Guidance::NormalDepth, 4)];
-    for (guidance, dims) in guided_rows.into_iter().filter(|_| "guided".contains(only.as_str())) {
+    for (guidance, dims) in guided_rows.into_iter().filter(|_| "guided".contains(only)) {
         for radius in [24, 32] {
             let f = Filter::Guided(GuidedParams { radius, guidance, ..GuidedParams::paper() });
-            let (ms, cpu_ms) = time_ms(&f, &color, &g, args.repeats)?;
-            bauszat.push(json!({"filter": "guided", "setting": format!("{dims} dimension, radius {radius}"),
-                "ms": ms, "cpu_ms": cpu_ms}));
+            row("guided", format!("{dims} dimension, radius {radius}"), f, args.repeats)?;
         }
     }
+    Ok(rows)
+}
 
-    let mut out = super::output::stdout();
-    if args.json {
-        let report = json!({
-            "threads": threads,
-            "repeats": args.repeats,
-            "statistic": "median over repeats; ms = wall clock, cpu_ms = CPU time of all threads",
-            "dammertz2010_table2": dammertz,
-            "bauszat2011_table2": {"width": w, "height": h, "rows": bauszat},
-        });
-        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
-        return Ok(out.flush()?);
-    }
+fn write_json(out: &mut impl Write, t: &Tables, repeats: usize) -> anyhow::Result<()> {
+    let (w, h) = t.bauszat_res;
+    let report = json!({
+        "threads": t.threads,
+        "repeats": repeats,
+        "statistic": "median over repeats; ms = wall clock, cpu_ms = CPU time of all threads",
+        "dammertz2010_table2": t.dammertz,
+        "bauszat2011_table2": {"width": w, "height": h, "rows": t.bauszat},
+    });
+    writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+    Ok(())
+}
+
+/// Dammertz's table: a row per weight subset, a column per resolution and iteration count.
+fn write_dammertz_table(out: &mut impl Write, t: &Tables) -> anyhow::Result<()> {
+    let threads = t.threads;
     writeln!(out, "## À-Trous filter time in ms (Dammertz et al. 2010, Table 2 shape), {threads} threads\n")?;
     writeln!(out, "Each cell: median wall-clock ms / median CPU ms divided by {threads} threads.\n")?;
     let mut header = String::from("| # W |");
     let mut rule = String::from("|---:|");
-    for &(w, h) in &dammertz_res {
+    for &(w, h) in &t.dammertz_res {
         for it in [1, 5, 10] {
             header += &format!(" {w}x{h} {it} it |");
             rule += "---:|";
@@ -194,9 +226,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     writeln!(out, "{header}\n{rule}")?;
     for weights in 0..=3 {
         let mut line = format!("| {weights} |");
-        for &(w, h) in &dammertz_res {
+        for &(w, h) in &t.dammertz_res {
             for it in [1, 5, 10] {
-                let row = dammertz.iter().find(|r| {
+                let row = t.dammertz.iter().find(|r| {
                     r["width"] == w && r["height"] == h && r["iterations"] == it && r["weights"] == weights
                 });
                 let get = |k: &str| row.and_then(|r| r[k].as_f64()).unwrap_or(f64::NAN);
@@ -205,9 +237,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         writeln!(out, "{line}")?;
     }
+    Ok(())
+}
+
+fn write_bauszat_table(out: &mut impl Write, t: &Tables) -> anyhow::Result<()> {
+    let ((w, h), threads) = (t.bauszat_res, t.threads);
     writeln!(out, "\n## Filter execution time in ms at {w}x{h} (Bauszat et al. 2011, Table 2 shape)\n")?;
     writeln!(out, "| filter | setting | wall ms | CPU ms / {threads} |\n|---|---|---:|---:|")?;
-    for r in &bauszat {
+    for r in &t.bauszat {
         writeln!(
             out,
             "| {} | {} | {:.1} | {:.1} |",
@@ -217,5 +254,5 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r["cpu_ms"].as_f64().unwrap_or(f64::NAN) / threads as f64
         )?;
     }
-    Ok(out.flush()?)
+    Ok(())
 }

@@ -19,6 +19,7 @@ use std::io::Write;
 
 use super::render::{parse_resolution, Resolution};
 use super::render_args::TraceArg;
+use super::render_filtered::Pipeline;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -129,61 +130,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         indirect_paths: a.indirect_paths,
         ..PipelineSettings::interactive(a.res.width, a.res.height)
     };
-    let mut rows = Vec::new();
-    for f in &a.filter {
-        let choice = FilterChoice { preset: a.filter_preset.clone(), ..FilterChoice::named(f) };
-        let mut p = pool.install(|| {
-            let trace = Some(a.trace.mode());
-            super::render_filtered::build_pipeline_traced(
-                scene.clone(),
-                settings.clone(),
-                a.max_depth,
-                &choice,
-                trace,
-            )
-        })?;
-        let mut times: Vec<FrameTimings> = Vec::new();
-        let mut cpu = Vec::new();
-        for i in 0..a.warmup + a.frames {
-            if i == a.warmup {
-                p.source().take_lane_stats();
-            }
-            let c0 = process_cpu_ms();
-            let t =
-                pool.install(|| p.render_frame().map(|fr| fr.timings)).map_err(|e| anyhow::anyhow!("{e}"))?;
-            if i >= a.warmup {
-                times.push(t);
-                if let (Some(c0), Some(c1)) = (c0, process_cpu_ms()) {
-                    cpu.push(c1 - c0);
-                }
-            }
-        }
-        // Clock ticks are 10 ms, too coarse for a per-frame median: take the mean.
-        let cpu_ms_mean =
-            (cpu.len() == times.len()).then(|| cpu.iter().sum::<f64>() / cpu.len().max(1) as f64);
-        let fps_if_cores_free = cpu_ms_mean.map(|c| 1000.0 * threads as f64 / c.max(1e-9));
-        let col = |g: fn(&FrameTimings) -> f64| times.iter().map(g).collect::<Vec<_>>();
-        let stages = vec![
-            stats("guide", col(|t| t.guide_ms)),
-            stats("filter", col(|t| t.filter_ms)),
-            stats("samples", col(|t| t.samples_ms)),
-            stats("lookup", col(|t| t.lookup_ms)),
-            stats("total", col(|t| t.total_ms)),
-        ];
-        let fps_median = 1000.0 / stages[4].median_ms.max(1e-9);
-        let lanes = p.source().take_lane_stats();
-        let lockstep = p.source().lane_code().is_some();
-        rows.push(Row {
-            filter: p.filter_mut().label(),
-            frames: a.frames,
-            fps_median,
-            cpu_ms_mean,
-            fps_if_cores_free,
-            stages,
-            lane_utilisation: lockstep.then(|| lanes.mean_utilisation()),
-            lane_groups_per_frame: lockstep.then(|| lanes.bounces as f64 / a.frames as f64),
-        });
-    }
+    let rows = a
+        .filter
+        .iter()
+        .map(|f| time_filter(&a, &pool, &scene, &settings, f, threads))
+        .collect::<anyhow::Result<Vec<Row>>>()?;
     let report = Report {
         scene: a.scene.clone(),
         width: a.res.width,
@@ -199,12 +150,89 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let mut out = super::output::stdout();
     if a.json {
         writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
-        return Ok(out.flush()?);
+    } else {
+        write_table(&mut out, &report, a.frames)?;
     }
+    Ok(out.flush()?)
+}
+
+/// The row of filter `filter`: its pipeline's warm-up and timed frames, per stage.
+fn time_filter(
+    a: &Args,
+    pool: &rayon::ThreadPool,
+    scene: &filtrace_scene::Scene,
+    settings: &PipelineSettings,
+    filter: &str,
+    threads: usize,
+) -> anyhow::Result<Row> {
+    let choice = FilterChoice { preset: a.filter_preset.clone(), ..FilterChoice::named(filter) };
+    let mut p = pool.install(|| {
+        let trace = Some(a.trace.mode());
+        super::render_filtered::build_pipeline_traced(
+            scene.clone(),
+            settings.clone(),
+            a.max_depth,
+            &choice,
+            trace,
+        )
+    })?;
+    let (times, cpu) = time_frames(a, pool, &mut p)?;
+    // Clock ticks are 10 ms, too coarse for a per-frame median: take the mean.
+    let cpu_ms_mean = (cpu.len() == times.len()).then(|| cpu.iter().sum::<f64>() / cpu.len().max(1) as f64);
+    let fps_if_cores_free = cpu_ms_mean.map(|c| 1000.0 * threads as f64 / c.max(1e-9));
+    let col = |g: fn(&FrameTimings) -> f64| times.iter().map(g).collect::<Vec<_>>();
+    let stages = vec![
+        stats("guide", col(|t| t.guide_ms)),
+        stats("filter", col(|t| t.filter_ms)),
+        stats("samples", col(|t| t.samples_ms)),
+        stats("lookup", col(|t| t.lookup_ms)),
+        stats("total", col(|t| t.total_ms)),
+    ];
+    let fps_median = 1000.0 / stages[4].median_ms.max(1e-9);
+    let lanes = p.source().take_lane_stats();
+    let lockstep = p.source().lane_code().is_some();
+    Ok(Row {
+        filter: p.filter_mut().label(),
+        frames: a.frames,
+        fps_median,
+        cpu_ms_mean,
+        fps_if_cores_free,
+        stages,
+        lane_utilisation: lockstep.then(|| lanes.mean_utilisation()),
+        lane_groups_per_frame: lockstep.then(|| lanes.bounces as f64 / a.frames as f64),
+    })
+}
+
+/// Renders `--warmup` frames, then `--frames` timed ones (lane statistics restarted at the
+/// first); returns the timed frames' stage times and process CPU milliseconds.
+fn time_frames(
+    a: &Args,
+    pool: &rayon::ThreadPool,
+    p: &mut Pipeline,
+) -> anyhow::Result<(Vec<FrameTimings>, Vec<f64>)> {
+    let mut times = Vec::new();
+    let mut cpu = Vec::new();
+    for i in 0..a.warmup + a.frames {
+        if i == a.warmup {
+            p.source().take_lane_stats();
+        }
+        let c0 = process_cpu_ms();
+        let t = pool.install(|| p.render_frame().map(|fr| fr.timings)).map_err(|e| anyhow::anyhow!("{e}"))?;
+        if i >= a.warmup {
+            times.push(t);
+            if let (Some(c0), Some(c1)) = (c0, process_cpu_ms()) {
+                cpu.push(c1 - c0);
+            }
+        }
+    }
+    Ok((times, cpu))
+}
+
+fn write_table(out: &mut impl Write, report: &Report, frames: u32) -> anyhow::Result<()> {
     writeln!(
         out,
         "filtered pipeline: {} {}x{}, {} spp, {} indirect path(s), max depth {}, {} tracer, {} threads, {} triangles, median of {} frames",
-        report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, report.trace, threads, triangles, a.frames
+        report.scene, report.width, report.height, report.spp, report.indirect_paths, report.max_depth, report.trace, report.threads, report.triangles, frames
     )?;
     writeln!(out)?;
     writeln!(out, "| filter | guide ms | filter ms | samples ms | lookup ms | frame ms | fps | CPU ms/frame | fps, cores free | lanes used |")?;
@@ -226,5 +254,5 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             r.lane_utilisation.map_or("-".into(), |u| format!("{:.1} %", 100.0 * u))
         )?;
     }
-    Ok(out.flush()?)
+    Ok(())
 }

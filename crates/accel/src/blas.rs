@@ -365,7 +365,7 @@ impl<const W: usize> WideBvh<W> {
         params: &BuildParams,
     ) -> Option<Self> {
         let plain = Self::from_tree(sah::build_binary(boxes, params), ids, tri_count, &tri)?;
-        if params.spatial_split_budget <= 0.0 {
+        if params.spatial_split_budget <= 0.0 || boxes.len() > params.max_spatial_split_references {
             return Some(plain);
         }
         let corners: Vec<[Vec3; 3]> = ids.iter().map(|&i| tri(i as usize)).collect();

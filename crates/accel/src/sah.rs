@@ -60,20 +60,33 @@ pub struct BuildParams {
     /// extra references to the `n` references of the mesh; the split tree is kept only
     /// where its SAH cost is lower than the plain one's. Pays on overlapping triangles
     /// (engine: -12..-20 % closest-hit instructions), nothing on grass and bunny-room, for
-    /// 2.4-4.3x the build (`docs/perf-accel.md` "Stop 18"). 0 turns it off (the presets);
+    /// 2.4-4.3x the build (`docs/perf-accel.md` "Stop 18"). 0 turns it off
+    /// (`fastest_build`); `balanced` and `high_quality` use 0.3;
     /// [`BuildParams::default`] takes it from the environment variable
     /// [`SPATIAL_SPLITS_ENV`] when set, for measuring whole renders.
     pub spatial_split_budget: f32,
+    /// Bottom levels of more references than this are built without spatial splits: the
+    /// spatial builder bins each node on one thread and builds the plain tree too, which
+    /// on the 1M-triangle `grass-1m` took 2 s -> 11-13 s for rays no faster (SAH -1.7 %).
+    pub max_spatial_split_references: usize,
 }
 
 /// Environment variable that sets [`BuildParams::spatial_split_budget`] of
 /// [`BuildParams::default`] (e.g. `FILTRACE_SPATIAL_SPLITS=0.3`): a measurement knob for
-/// `filtrace bench suite` and renders; unset, empty or not a number: 0.
+/// `filtrace bench suite` and renders (0 turns them off); unset, empty or not a number:
+/// the preset's.
 pub const SPATIAL_SPLITS_ENV: &str = "FILTRACE_SPATIAL_SPLITS";
 
-/// Extra references the presets allow for spatial splits: none (see `docs/perf-accel.md`
-/// "Stop 18").
-const SPATIAL_SPLIT_BUDGET: f32 = 0.0;
+/// Extra references `balanced` and `high_quality` allow for spatial splits (a fraction of
+/// the references). Release, idle machine, interleaved (`docs/perf-accel.md` "Stop 18"):
+/// the engine's incoherent closest hits +20-30 %, its render +15-25 %; bunny-room and
+/// grass keep their plain trees (build +0.15-0.2 s on 2 threads); the engine's build
+/// 0.1 -> 0.44 s.
+const SPATIAL_SPLIT_BUDGET: f32 = 0.3;
+
+/// Largest bottom level `balanced` builds with spatial splits
+/// ([`BuildParams::max_spatial_split_references`]).
+const MAX_SPATIAL_SPLIT_REFERENCES: usize = 1 << 18;
 
 /// Extra references the presets allow for split triangles (a fraction of the triangles):
 /// none. On the suite's meshes (grass, engine, bunny-room, bunny, teapot) splitting with a
@@ -104,7 +117,8 @@ impl BuildParams {
             max_flat_triangles: 40,
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
-            spatial_split_budget: SPATIAL_SPLIT_BUDGET,
+            spatial_split_budget: 0.0,
+            max_spatial_split_references: 0,
         }
     }
 
@@ -121,6 +135,7 @@ impl BuildParams {
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
             spatial_split_budget: SPATIAL_SPLIT_BUDGET,
+            max_spatial_split_references: MAX_SPATIAL_SPLIT_REFERENCES,
         }
     }
 
@@ -137,6 +152,7 @@ impl BuildParams {
             split_budget: SPLIT_BUDGET,
             min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
             spatial_split_budget: SPATIAL_SPLIT_BUDGET,
+            max_spatial_split_references: usize::MAX,
         }
     }
 
@@ -151,11 +167,12 @@ impl BuildParams {
 }
 
 impl Default for BuildParams {
-    /// [`BuildParams::balanced`], with spatial splits from [`SPATIAL_SPLITS_ENV`] if set.
+    /// [`BuildParams::balanced`], with the spatial split budget from [`SPATIAL_SPLITS_ENV`]
+    /// if set.
     fn default() -> Self {
         let budget = std::env::var(SPATIAL_SPLITS_ENV).ok().and_then(|v| v.trim().parse::<f32>().ok());
         let spatial_split_budget =
-            budget.filter(|b| b.is_finite() && *b > 0.0).unwrap_or(SPATIAL_SPLIT_BUDGET);
+            budget.filter(|b| b.is_finite() && *b >= 0.0).unwrap_or(SPATIAL_SPLIT_BUDGET);
         Self { spatial_split_budget, ..Self::balanced() }
     }
 }

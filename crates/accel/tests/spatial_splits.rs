@@ -32,7 +32,7 @@ fn single(mesh: Mesh) -> Scene {
 }
 
 fn spatial(params: &BuildParams, budget: f32) -> BuildParams {
-    BuildParams { spatial_split_budget: budget, ..params.clone() }
+    BuildParams { spatial_split_budget: budget, max_spatial_split_references: usize::MAX, ..params.clone() }
 }
 
 /// `count` triangles with corners anywhere in `[-1, 1]^3` (large and crossing each
@@ -222,14 +222,21 @@ fn spatial_split_tree_does_not_depend_on_the_thread_count() {
     assert_eq!(format!("{one:?}"), format!("{:?}", stats(4)));
 }
 
-/// The presets leave spatial splits off: not yet measured to pay (`docs/perf-accel.md`
-/// "Stop 18").
+/// `fastest_build` has no spatial splits, `balanced` (the renderer's) splits thin blades,
+/// and no preset splits a bottom level above `max_spatial_split_references`.
 #[test]
-fn presets_do_not_split_spatially() {
+fn presets_split_spatially_up_to_their_limit() {
+    let blades = single(testmesh::thin_blades(100, 3));
+    let stats = |params: &BuildParams| SceneAccel::build_with(&blades, params).stats();
+    let fast = stats(&BuildParams::fastest_build());
+    assert_eq!(fast.references, fast.triangles, "fastest_build: {fast:?}");
+    let balanced = stats(&BuildParams::balanced());
+    assert!(balanced.references > balanced.triangles, "balanced: {balanced:?}");
+    assert!(BuildParams::high_quality().spatial_split_budget > 0.0);
     for (name, params) in BuildParams::presets() {
-        assert_eq!(params.spatial_split_budget, 0.0, "{name}");
-        let accel = SceneAccel::build_with(&single(testmesh::thin_blades(100, 3)), &params);
-        assert_eq!(accel.stats().references, accel.stats().triangles, "{name}");
+        let capped = BuildParams { max_spatial_split_references: balanced.triangles - 1, ..params };
+        let capped = stats(&capped);
+        assert_eq!(capped.references, capped.triangles, "{name} above its limit: {capped:?}");
     }
 }
 

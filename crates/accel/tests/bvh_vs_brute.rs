@@ -9,7 +9,7 @@ use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd};
 use filtrace_core::shared_data::shared_path;
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
-use rays::random_rays;
+use rays::{kernels, random_rays};
 
 fn single(mesh: Mesh) -> Scene {
     let mut s = Scene::default();
@@ -68,17 +68,6 @@ fn check_ray(accel: &SceneAccel, brute: &BruteForce, ray: &Ray) -> Result<(), St
 fn check_hit_in_range(h: &Hit, ray: &Ray) -> Result<(), String> {
     let ok = h.t >= ray.t_min && h.t <= ray.t_max && h.u >= -1e-6 && h.v >= -1e-6 && h.u + h.v <= 1.0 + 1e-5;
     ok.then_some(()).ok_or_else(|| format!("hit out of range {h:?} for {ray:?}"))
-}
-
-/// Both kernels: the SSE path (forced, as on CPUs without AVX2) and the AVX2 path (when
-/// this CPU has it; otherwise a message says it was skipped).
-fn kernels() -> Vec<Simd> {
-    if Simd::Avx2.available() {
-        vec![Simd::Sse, Simd::Avx2]
-    } else {
-        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
-        vec![Simd::Sse]
-    }
 }
 
 /// Builds `scene` for every kernel; small scenes also without the flat path (a BVH over

@@ -10,16 +10,7 @@ use filtrace_accel::testmesh;
 use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd, TopLevelUpdate, MERGE_FLOOR_TRIANGLES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
-use rays::{bits, random_rays};
-
-fn kernels() -> Vec<Simd> {
-    if Simd::Avx2.available() {
-        vec![Simd::Sse, Simd::Avx2]
-    } else {
-        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
-        vec![Simd::Sse]
-    }
-}
+use rays::{bits, kernels, random_rays};
 
 /// Four meshes (two BVH, two flat), eight instances: rotated, uniformly and non-uniformly
 /// scaled, mirrored in one axis and in all three, sheared, and one identity; meshes shared.

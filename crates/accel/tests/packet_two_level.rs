@@ -9,19 +9,10 @@
 mod rays;
 
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, TopLevelUpdate, LANES};
+use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, TopLevelUpdate, LANES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
-use rays::bits;
-
-fn kernels() -> Vec<Simd> {
-    if Simd::Avx2.available() {
-        vec![Simd::Sse, Simd::Avx2]
-    } else {
-        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
-        vec![Simd::Sse]
-    }
-}
+use rays::{bits, kernels};
 
 /// A random rigid-plus-scale transform inside a cube of side `spread`.
 fn random_transform(rng: &mut SplitMix64, spread: f32) -> Affine3A {

@@ -8,19 +8,10 @@
 mod rays;
 
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BuildParams, HitPacket, RayPacket, SceneAccel, Simd, LANES};
+use filtrace_accel::{BuildParams, HitPacket, RayPacket, SceneAccel, LANES};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Mesh, Scene};
-use rays::bits;
-
-fn kernels() -> Vec<Simd> {
-    if Simd::Avx2.available() {
-        vec![Simd::Sse, Simd::Avx2]
-    } else {
-        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
-        vec![Simd::Sse]
-    }
-}
+use rays::{bits, kernels};
 
 fn single(mesh: Mesh, transform: Affine3A) -> Scene {
     let mut s = Scene::default();

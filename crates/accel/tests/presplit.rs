@@ -4,63 +4,22 @@
 //! 8-ray packets, alone and instanced, for every preset, budget and kernel; and its tree
 //! is not worse by the surface area heuristic than the one built without splitting.
 
+#[path = "support/blades.rs"]
+mod blades;
 #[path = "support/rays.rs"]
 mod rays;
 
+use blades::{check_rays, instanced_blades};
 use filtrace_accel::testmesh;
-use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, LANES};
-use filtrace_core::{Affine3A, Quat, Ray, Vec3};
-use filtrace_scene::{Instance, Scene};
-use rays::{bits, random_rays};
-
-fn kernels() -> Vec<Simd> {
-    if Simd::Avx2.available() {
-        vec![Simd::Sse, Simd::Avx2]
-    } else {
-        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
-        vec![Simd::Sse]
-    }
-}
+use filtrace_accel::{BruteForce, BuildParams, SceneAccel};
+use filtrace_core::{Ray, Vec3};
+use filtrace_scene::Scene;
+use rays::{kernels, random_rays};
 
 fn blades(count: usize, seed: u64) -> Scene {
     let mut s = Scene::default();
     s.add_mesh(testmesh::thin_blades(count, seed));
     s
-}
-
-/// The blades twice more, rotated and scaled (two-level BVH), beside the identity one.
-fn instanced_blades() -> Scene {
-    let mut s = blades(300, 8);
-    let place = |scale: f32, rot: Quat, t: Vec3| Instance {
-        mesh: 0,
-        transform: Affine3A::from_scale_rotation_translation(Vec3::splat(scale), rot, t),
-        material_override: None,
-    };
-    s.instances.push(place(0.7, Quat::from_rotation_y(0.8), Vec3::new(2.5, 0.2, 0.0)));
-    s.instances.push(place(1.3, Quat::from_rotation_x(0.4), Vec3::new(-0.5, 0.5, 2.5)));
-    s
-}
-
-/// Single-ray and packet queries of `accel` equal brute force on `rays`; returns the hits.
-fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
-    let mut hits = 0;
-    for ray in rays {
-        let want = brute.intersect(ray);
-        assert_eq!(bits(accel.intersect(ray)), bits(want), "{name}: ray {ray:?}");
-        assert_eq!(accel.occluded(ray), want.is_some(), "{name}: occlusion of {ray:?}");
-        hits += want.is_some() as usize;
-    }
-    for chunk in rays.chunks(LANES) {
-        let (packet, active) = RayPacket::from_rays(chunk);
-        let (closest, occluded) =
-            (accel.intersect_packet(&packet, active), accel.occluded_packet(&packet, active));
-        for (i, ray) in chunk.iter().enumerate() {
-            let want = brute.intersect(ray);
-            assert_eq!(bits(closest.lane(i)), bits(want), "{name}: packet lane {i}, ray {ray:?}");
-            assert_eq!(occluded & (1 << i) != 0, want.is_some(), "{name}: packet occlusion of {ray:?}");
-        }
-    }
-    hits
 }
 
 fn check_scene(scene: &Scene, n: usize, seed: u64) {

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use filtrace_accel::testmesh::SplitMix64;
-use filtrace_accel::Hit;
+use filtrace_accel::{Hit, Simd};
 use filtrace_core::{Ray, Vec3};
 use filtrace_scene::Scene;
 
@@ -32,4 +32,14 @@ pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
 /// The bits of a hit (`t`, `u`, `v`, instance, primitive), for exact comparisons.
 pub fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
     h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
+}
+
+/// The kernels this CPU runs: SSE always, AVX2 where available (said when skipped).
+pub fn kernels() -> Vec<Simd> {
+    if Simd::Avx2.available() {
+        vec![Simd::Sse, Simd::Avx2]
+    } else {
+        println!("SKIPPED: the AVX2 kernels (no AVX2 on this CPU)");
+        vec![Simd::Sse]
+    }
 }

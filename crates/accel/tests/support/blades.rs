@@ -1,0 +1,44 @@
+//! Thin blades, instanced, and the brute-force comparison of every query shared by the
+//! splitting tests (`presplit.rs`, `spatial_splits.rs`; included with `#[path]`).
+
+use crate::rays::bits;
+use filtrace_accel::{testmesh, BruteForce, RayPacket, SceneAccel, LANES};
+use filtrace_core::{Affine3A, Quat, Ray, Vec3};
+use filtrace_scene::{Instance, Scene};
+
+/// `thin_blades(300, 8)` three times: as they are and twice more, rotated and scaled
+/// (two-level BVH).
+pub fn instanced_blades() -> Scene {
+    let mut s = Scene::default();
+    s.add_mesh(testmesh::thin_blades(300, 8));
+    let place = |scale: f32, rot: Quat, t: Vec3| Instance {
+        mesh: 0,
+        transform: Affine3A::from_scale_rotation_translation(Vec3::splat(scale), rot, t),
+        material_override: None,
+    };
+    s.instances.push(place(0.7, Quat::from_rotation_y(0.8), Vec3::new(2.5, 0.2, 0.0)));
+    s.instances.push(place(1.3, Quat::from_rotation_x(0.4), Vec3::new(-0.5, 0.5, 2.5)));
+    s
+}
+
+/// Single-ray and packet queries of `accel` equal brute force on `rays`; returns the hits.
+pub fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
+    let mut hits = 0;
+    for ray in rays {
+        let want = brute.intersect(ray);
+        assert_eq!(bits(accel.intersect(ray)), bits(want), "{name}: ray {ray:?}");
+        assert_eq!(accel.occluded(ray), want.is_some(), "{name}: occlusion of {ray:?}");
+        hits += want.is_some() as usize;
+    }
+    for chunk in rays.chunks(LANES) {
+        let (packet, active) = RayPacket::from_rays(chunk);
+        let (closest, occluded) =
+            (accel.intersect_packet(&packet, active), accel.occluded_packet(&packet, active));
+        for (i, ray) in chunk.iter().enumerate() {
+            let want = brute.intersect(ray);
+            assert_eq!(bits(closest.lane(i)), bits(want), "{name}: packet lane {i}, ray {ray:?}");
+            assert_eq!(occluded & (1 << i) != 0, want.is_some(), "{name}: packet occlusion of {ray:?}");
+        }
+    }
+    hits
+}

@@ -9,10 +9,9 @@ mod blades;
 #[path = "support/rays.rs"]
 mod rays;
 
-use blades::{check_rays, instanced_blades};
+use blades::{check_rays, instanced_blades, rays_at_corners_and_edges};
 use filtrace_accel::testmesh;
 use filtrace_accel::{BruteForce, BuildParams, SceneAccel};
-use filtrace_core::{Ray, Vec3};
 use filtrace_scene::Scene;
 use rays::{kernels, random_rays};
 
@@ -62,15 +61,7 @@ fn split_instanced_blades_match_brute_force() {
 fn rays_at_blade_vertices_and_edges_match_brute_force() {
     let scene = blades(200, 9);
     let brute = BruteForce::build(&scene);
-    let mesh = &scene.meshes[0];
-    let origin = Vec3::new(0.1, 3.0, -0.2);
-    let mut rays = Vec::new();
-    for i in 0..mesh.triangle_count() {
-        let [a, b, c] = mesh.triangle(i);
-        for target in [a, b, c, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a), (a + b + c) / 3.0] {
-            rays.push(Ray::new(origin, target - origin));
-        }
-    }
+    let rays = rays_at_corners_and_edges(&scene);
     for simd in kernels() {
         let params = BuildParams { split_budget: 1.0, ..BuildParams::default() };
         let accel = SceneAccel::build_simd(&scene, &params, simd);

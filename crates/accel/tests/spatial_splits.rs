@@ -11,11 +11,11 @@ mod blades;
 #[path = "support/rays.rs"]
 mod rays;
 
-use blades::{check_rays, instanced_blades};
+use blades::{check_rays, instanced_blades, rays_at_corners_and_edges};
 use filtrace_accel::testmesh::{self, SplitMix64};
 use filtrace_accel::{BruteForce, BuildParams, SceneAccel, Simd};
 use filtrace_core::shared_data::shared_path;
-use filtrace_core::{Ray, Vec3};
+use filtrace_core::Vec3;
 use filtrace_scene::{Mesh, Scene};
 use rays::{kernels, random_rays};
 
@@ -124,15 +124,7 @@ fn spatially_split_soup_with_degenerate_triangles_matches_brute_force() {
 fn rays_at_split_blade_vertices_and_edges_match_brute_force() {
     let scene = single(testmesh::thin_blades(200, 9));
     let brute = BruteForce::build(&scene);
-    let mesh = &scene.meshes[0];
-    let origin = Vec3::new(0.1, 3.0, -0.2);
-    let mut rays = Vec::new();
-    for i in 0..mesh.triangle_count() {
-        let [a, b, c] = mesh.triangle(i);
-        for target in [a, b, c, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a), (a + b + c) / 3.0] {
-            rays.push(Ray::new(origin, target - origin));
-        }
-    }
+    let rays = rays_at_corners_and_edges(&scene);
     for (layout, params, simd) in layouts(&spatial(&BuildParams::default(), 1.0)) {
         let accel = SceneAccel::build_simd(&scene, &params, simd);
         accel.validate().unwrap_or_else(|e| panic!("{layout}: {e}"));

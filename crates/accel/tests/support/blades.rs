@@ -42,3 +42,18 @@ pub fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &s
     }
     hits
 }
+
+/// Rays from above the blades at the corners, edge midpoints and centre of every triangle
+/// of the scene's first mesh: where split pieces meet.
+pub fn rays_at_corners_and_edges(scene: &Scene) -> Vec<Ray> {
+    let mesh = &scene.meshes[0];
+    let origin = Vec3::new(0.1, 3.0, -0.2);
+    let mut rays = Vec::new();
+    for i in 0..mesh.triangle_count() {
+        let [a, b, c] = mesh.triangle(i);
+        for target in [a, b, c, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a), (a + b + c) / 3.0] {
+            rays.push(Ray::new(origin, target - origin));
+        }
+    }
+    rays
+}

@@ -69,8 +69,8 @@ impl CacheRecord {
     /// in one call instead of one dispatch per technique.
     #[inline]
     pub fn pmfs(&self, j: usize) -> [f32; TECHNIQUES] {
-        let [full, unoccluded, bounded] = &self.distributions;
-        [full.pmf(j), unoccluded.pmf(j), bounded.pmf(j), self.pmf(Technique::Uniform, j)]
+        let [full, unoccluded, bounded] = self.cdf_pmfs(j);
+        [full, unoccluded, bounded, self.pmf(Technique::Uniform, j)]
     }
 
     /// `p_t(j)` of E¹, E², E³ (the CDFs' steps: [`CacheRecord::pmf`]'s values); E⁴'s

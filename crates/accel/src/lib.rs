@@ -41,9 +41,10 @@
 //! Optionally ([`BuildParams::split_budget`], off in the presets) long thin diagonal
 //! triangles are pre-split before a bottom level is built (`presplit.rs`, Karras & Aila
 //! 2013): the builder gets the boxes of clipped pieces, and a leaf stores each triangle it
-//! references once. Also optional ([`BuildParams::spatial_split_budget`], off in the
-//! presets): spatial splits in the bottom-level build (`spatial.rs`, SBVH, Stich et al.
-//! 2009), a tree kept only when its SAH cost is lower than the plain one's.
+//! references once. Spatial splits in the bottom-level build (`spatial.rs`, SBVH, Stich
+//! et al. 2009; [`BuildParams::spatial_split_budget`]: 0.3 in `balanced`, the default,
+//! up to [`BuildParams::max_spatial_split_references`], and in `high_quality`; off in
+//! `fastest_build`) give a tree kept only when its SAH cost is lower than the plain one's.
 //! Triangle boxes are padded a little (`packet::padded_boxes`) so that no box culls a hit
 //! the watertight test's rounding puts just outside it. Measurements against Embree 4:
 //! `docs/perf-accel.md` and `docs/performance.md` (1 thread, incoherent closest hits,

@@ -157,24 +157,35 @@ impl VplCdf {
 
     /// [`VplCdf::new`] of each list: `filtrace_core`'s `normalized_cdf` of the sanitised
     /// weights, the same arithmetic in the same order (so the same bits), without the
-    /// sanitised copy and without a `push` per cell.
+    /// sanitised copy and without a `push` per cell; one scratch of running sums for all.
     fn several<const K: usize>(weights: [&[f32]; K]) -> [Self; K] {
-        weights.map(|w| {
-            // `normalized_cdf`'s sum (`f64`'s `Sum`, whose start value it keeps).
-            let total64: f64 = w.iter().map(|&x| sanitised(x) as f64).sum();
-            VplCdf::from_total(w, total64)
-        })
+        let longest = weights.iter().map(|w| w.len()).max().unwrap_or(0);
+        let mut running = vec![0.0f64; longest];
+        weights.map(|w| VplCdf::from_running_sums(w, &mut running[..w.len()]))
     }
 
-    /// The CDF of `weights` whose sanitised sum is `total64` (`normalized_cdf`'s loop).
-    fn from_total(weights: &[f32], total64: f64) -> Self {
+    /// `normalized_cdf`'s loop in three passes over `running` (as long as `weights`): the
+    /// sanitised weights as `f64` (vectorised), their running sums (in order: the last
+    /// is its total, the same additions in the same order), then the divisions,
+    /// independent per cell (vectorised). The same values as one pass
+    /// (`vpl_cdf_equals_distribution1d`).
+    fn from_running_sums(weights: &[f32], running: &mut [f64]) -> Self {
         let n = weights.len();
+        for (r, &w) in running.iter_mut().zip(weights) {
+            *r = sanitised(w) as f64;
+        }
+        // `f64`'s `Sum` start value (what `normalized_cdf` sums an empty list to; adding
+        // to it changes nothing else).
+        let mut acc: f64 = std::iter::empty::<f64>().sum();
+        for r in running.iter_mut() {
+            acc += *r;
+            *r = acc;
+        }
+        let total64 = acc;
         let mut cdf = vec![0.0f32; n + 1];
         if total64 > 0.0 && total64.is_finite() {
-            let mut acc = 0.0f64;
-            for (c, &w) in cdf[1..].iter_mut().zip(weights) {
-                acc += sanitised(w) as f64;
-                *c = (acc / total64) as f32;
+            for (c, &a) in cdf[1..].iter_mut().zip(&*running) {
+                *c = (a / total64) as f32;
             }
         } else {
             for (i, c) in cdf.iter_mut().enumerate().skip(1) {

@@ -98,6 +98,16 @@ impl RecordValues {
         self.totals = [Rgb::ZERO; 3];
     }
 
+    /// `n` entries per list without zeroing those already there, and zero totals: for
+    /// an evaluation that writes every entry (a zero fill per record cost as much as
+    /// the CDFs' divisions).
+    pub(crate) fn resize_for_overwrite(&mut self, n: usize) {
+        for v in [&mut self.full, &mut self.unoccluded, &mut self.bounded] {
+            v.resize(n, 0.0);
+        }
+        self.totals = [Rgb::ZERO; 3];
+    }
+
     /// Stores VPL `j`'s three contributions (RGB; the distributions keep luminance).
     #[inline]
     pub fn set(&mut self, j: usize, full: Rgb, unoccluded: Rgb, bounded: Rgb) {
@@ -119,10 +129,10 @@ pub(crate) struct RgbColumns {
 }
 
 impl RgbColumns {
-    /// Resets to `n` zero entries.
-    pub fn clear(&mut self, n: usize) {
+    /// `n` entries per column, those already there kept: for an evaluation that
+    /// writes every entry.
+    pub fn resize_for_overwrite(&mut self, n: usize) {
         for v in self.c.iter_mut().chain(&mut self.b) {
-            v.clear();
             v.resize(n, 0.0);
         }
     }

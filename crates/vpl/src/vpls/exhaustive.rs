@@ -154,10 +154,15 @@ impl<'a> SceneVpls<'a> {
         isa: Isa,
     ) {
         let n = self.vpls.len();
-        out.clear(n);
-        let Some(rx) = self.receiver(site) else { return };
+        let Some(rx) = self.receiver(site) else {
+            out.clear(n);
+            return;
+        };
+        // Every entry of the lists and columns is written below (the groups and `others`
+        // partition the VPLs): sized, not zeroed first.
+        out.resize_for_overwrite(n);
         let (mut rgb, mut visible) = (std::mem::take(&mut out.rgb), std::mem::take(&mut out.visible));
-        rgb.clear(n);
+        rgb.resize_for_overwrite(n);
         visible.clear();
         visible.resize(n, false);
         let relaxed = RelaxedReceiver::new(rx.si.n_s, region.radius, region.normal_cone);
@@ -193,9 +198,7 @@ impl<'a> SceneVpls<'a> {
             columns.zip(&visible[..n]).zip(luminances)
         {
             let (c, b) = (Rgb::new(r, g, b), Rgb::new(b_r, b_g, b_b));
-            if vis {
-                *full = unoccluded;
-            }
+            *full = if vis { unoccluded } else { 0.0 };
             out.totals[0] += if vis { c } else { Rgb::ZERO };
             out.totals[1] += c;
             out.totals[2] += b;

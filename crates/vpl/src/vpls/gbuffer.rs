@@ -4,7 +4,7 @@
 //! centres ([`crate::cache::place_on_surfaces`]), and the cache then needs a receiver
 //! (surface, BSDF, outgoing direction) at each chosen pixel only. So the primary rays are
 //! traced on demand ([`CameraSurfaces`], one per pixel tried; the whole screen only when a
-//! top-up needs the mask of every surface pixel), and the receivers are built for the
+//! top-up's rejection draws find too little surface), and the receivers are built for the
 //! records' pixels ([`RecordReceivers`]). The same rays through the same centres as a
 //! full G-buffer: the same points and receivers bit for bit.
 

@@ -157,8 +157,9 @@ pub fn frame_memory(
         + bytes_of::<RecordParams>(1)
         + bytes_of::<Vec3>(2)
         + 16;
-    // `RecordValues`: three luminances, two RGB contributions and a visibility per VPL.
-    let scratch = threads as u64 * vpls * (3 * 4 + 2 * 12 + 1);
+    // `RecordValues`: three luminances, two RGB contributions and a visibility per VPL;
+    // the CDFs' running sums (`f64`) while a record's distributions are built.
+    let scratch = threads as u64 * vpls * (3 * 4 + 2 * 12 + 1 + 8);
     let learns = cached && settings.sampler == SamplerKind::Optimized;
     let history = records * settings.cache.optimizer.history as u64;
     let feedback = pixels * max_pass as u64;

@@ -126,8 +126,7 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             // SAFETY: this function runs with AVX2 (its target features).
             let (mask, tn) = unsafe { node.boxes(r, t_min8, *t_max) };
             if mask != 0 {
-                // Any hits keep no distances (as Embree's occlusion stack): `t_max` never
-                // shrinks, so no pushed entry could be culled later.
+                // Any hits keep no distances, as Embree's occlusion stack (see the pop).
                 if ORDERED {
                     // SAFETY: `Lanes8` is 32-byte aligned.
                     unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };

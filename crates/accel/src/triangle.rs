@@ -40,7 +40,9 @@ impl WatertightRay {
         let x_max = (a.x >= a.y) & (a.x >= a.z);
         let z_over_y = a.y < a.z;
         let kz = (!x_max as usize) * (1 + z_over_y as usize);
-        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
+        // `kx = [1, 2, 0][kz]`, `ky = [2, 0, 1][kz]` as two-bit fields of a constant (the
+        // arrays were written to the stack on every ray).
+        let (kx, ky) = ((0b00_10_01 >> (2 * kz)) & 3, (0b01_00_10 >> (2 * kz)) & 3);
         // Swap kx and ky to preserve the winding direction of triangles.
         let swap = 0usize.wrapping_sub((d[kz] < 0.0) as usize);
         let (kx, ky) = (kx ^ ((kx ^ ky) & swap), ky ^ ((kx ^ ky) & swap));

@@ -324,7 +324,9 @@ pub(crate) fn push_children<const ORDERED: bool>(
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            stack[*sp] = MaybeUninit::new(e(i));
+            // SAFETY: a node pushes at most `width - 1` entries and the stacks hold that
+            // many per level of `MAX_DEPTH`, which built trees do not exceed (`validate`).
+            unsafe { *stack.get_unchecked_mut(*sp) = MaybeUninit::new(e(i)) };
             *sp += 1;
         }
         return e(last);

@@ -30,27 +30,40 @@ pub(crate) struct RayBoxes8 {
 }
 
 impl RayBoxes8 {
+    /// The three axes at once in one SSE register (lane `k` = axis `k`; the same
+    /// operations, each rounded once, as a scalar loop per axis), then splatted.
     #[inline(always)]
     pub unsafe fn new(origin: Vec3, dir: Vec3) -> Self {
-        let mut inv = [0.0f32; 3];
-        let mut lo = [0.0f32; 3];
-        let mut hi = [0.0f32; 3];
-        let mut near = [0; 3];
-        let mut far = [0; 3];
-        for k in 0..3 {
-            let d = if dir[k].abs() < 1e-30 { 1e-30f32.copysign(dir[k]) } else { dir[k] };
-            inv[k] = 1.0 / d;
-            let c = origin[k] * inv[k];
-            let e = c.abs() * (1.0 / (1u32 << 21) as f32) + 1e-30;
-            (lo[k], hi[k]) = (c + e, c - e);
-            // `inv[k] >= 0` exactly when `d` has no sign bit (`d` is never zero or NaN and
-            // `1 / d` never rounds to zero); testing `d` keeps the row offsets, which the
-            // first node's loads need, off the division's latency.
-            (near[k], far[k]) =
-                if d.is_sign_positive() { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
+        let d = _mm_setr_ps(dir.x, dir.y, dir.z, 1.0);
+        let o = _mm_setr_ps(origin.x, origin.y, origin.z, 0.0);
+        let sign = _mm_set1_ps(-0.0);
+        let tiny = _mm_set1_ps(1e-30);
+        let abs = |v: __m128| _mm_andnot_ps(sign, v);
+        // `±10^-30` (the sign of `d`) where `|d| < 10^-30`.
+        let small = _mm_cmplt_ps(abs(d), tiny);
+        let d = _mm_blendv_ps(d, _mm_or_ps(_mm_and_ps(d, sign), tiny), small);
+        let inv = _mm_div_ps(_mm_set1_ps(1.0), d);
+        let c = _mm_mul_ps(o, inv);
+        let e = _mm_add_ps(_mm_mul_ps(abs(c), _mm_set1_ps(1.0 / (1u32 << 21) as f32)), tiny);
+        let (lo, hi) = (_mm_add_ps(c, e), _mm_sub_ps(c, e));
+        // `inv[k] >= 0` exactly when `d` has no sign bit (`d` is never zero or NaN and
+        // `1 / d` never rounds to zero); testing `d` keeps the row offsets, which the
+        // first node's loads need, off the division's latency.
+        let negative = _mm_movemask_ps(d) as usize;
+        let rows =
+            |k: usize| if negative & (1 << k) == 0 { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
+        let (r0, r1, r2) = (rows(0), rows(1), rows(2));
+        let splat = |v: __m128| {
+            let v = _mm256_castps128_ps256(v);
+            [0, 1, 2].map(|k| _mm256_permutevar8x32_ps(v, _mm256_set1_epi32(k)))
+        };
+        Self {
+            inv: splat(inv),
+            oinv_near: splat(lo),
+            oinv_far: splat(hi),
+            near: [r0.0, r1.0, r2.0],
+            far: [r0.1, r1.1, r2.1],
         }
-        let splat = |v: [f32; 3]| v.map(|x| _mm256_set1_ps(x));
-        Self { inv: splat(inv), oinv_near: splat(lo), oinv_far: splat(hi), near, far }
     }
 }
 

@@ -132,12 +132,18 @@ impl Leaves for AnyPairs<'_> {
     fn visit(&mut self, first: u32, count: u32, t_max: &mut f32) -> bool {
         // A plain loop: a closure would not inherit the AVX2 target features and would
         // keep the kernels from being inlined.
+        // A lone last packet is tested twice (as both halves, all eight lanes used): the
+        // same answer without the lane mask.
         let (mut i, end) = (first as usize, (first + count) as usize);
+        assert!(end <= self.packets.len());
         while i < end {
-            let (b, lanes) =
-                if i + 1 < end { (&self.packets[i + 1], 0xff) } else { (&self.packets[i], 0x0f) };
-            // SAFETY: as in `ClosestPairs`.
-            if unsafe { _mm256_movemask_ps(test8v(&self.ray, &self.packets[i], b, lanes, *t_max).hit) } != 0 {
+            let j = if i + 1 < end { i + 1 } else { i };
+            // SAFETY: `i <= j < end <= packets.len()`; AVX2 as in `ClosestPairs`.
+            let hit = unsafe {
+                let (a, b) = (self.packets.get_unchecked(i), self.packets.get_unchecked(j));
+                _mm256_movemask_ps(test8v(&self.ray, a, b, 0xff, *t_max).hit)
+            };
+            if hit != 0 {
                 return true;
             }
             i += 2;

@@ -126,9 +126,12 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             // SAFETY: this function runs with AVX2 (its target features).
             let (mask, tn) = unsafe { node.boxes(r, t_min8, *t_max) };
             if mask != 0 {
-                // SAFETY: `Lanes8` is 32-byte aligned.
-                unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
-                let e = |i: usize| node.entry(i, t_near.0[i]);
+                // Any hits keep no distances, as Embree's occlusion stack (see the pop).
+                if ORDERED {
+                    // SAFETY: `Lanes8` is 32-byte aligned.
+                    unsafe { _mm256_store_ps(t_near.0.as_mut_ptr(), tn) };
+                }
+                let e = |i: usize| node.entry(i, if ORDERED { t_near.0[i] } else { 0.0 });
                 prefetch_children(nodes, node, mask, &leaves);
                 cur = if ORDERED && mask.count_ones() >= 3 {
                     // SAFETY: AVX2 (this function's target features); at most 8 entries
@@ -162,7 +165,9 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             // SAFETY: entries below `sp` were written before `sp` was raised past them
             // (and `sp < STACK8`).
             let e = unsafe { stack.get_unchecked(sp).assume_init() };
-            if e.t <= cull_bound(*t_max) {
+            // Any hits: no distance test. `t_max` never shrinks; a box kept only by the
+            // far-distance widening holds no hit in range, so the answer is the same.
+            if !ORDERED || e.t <= cull_bound(*t_max) {
                 cur = e;
                 break;
             }

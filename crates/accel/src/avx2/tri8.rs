@@ -5,14 +5,14 @@ use crate::tri4::{test4_scalar, Tri4};
 use crate::triangle::WatertightRay;
 use std::arch::x86_64::*;
 
-/// A ray prepared for the 8-lane triangle test: the watertight constants with the
-/// permuted origin and the shear factors splatted, and the row offsets of the permuted
-/// axes inside a [`Tri4`] corner (as [`crate::tri4::Ray4`]).
+/// A ray prepared for the 8-lane triangle test: the origin in the permuted axis order and
+/// the row offsets of the permuted axes inside a [`Tri4`] corner (as
+/// [`crate::tri4::Ray4`]). The eight-lane splats are made by each test with one
+/// broadcast from memory apiece: kept here, they were written to the stack on every query
+/// and read back from there by the tests all the same (most rays test one leaf or none).
 #[derive(Clone, Copy)]
 pub(crate) struct Ray8<'a> {
-    o: [__m256; 3],
-    s: [__m256; 3],
-    t_min8: __m256,
+    org: [f32; 3],
     pub(super) t_min: f32,
     row: [usize; 3],
     /// By reference: copying it into this struct would read back its scalar stores as
@@ -24,17 +24,19 @@ impl<'a> Ray8<'a> {
     #[inline(always)]
     pub unsafe fn new(ray: &'a WatertightRay, t_min: f32) -> Self {
         Self {
-            o: [
-                _mm256_set1_ps(ray.org[ray.kx]),
-                _mm256_set1_ps(ray.org[ray.ky]),
-                _mm256_set1_ps(ray.org[ray.kz]),
-            ],
-            s: [_mm256_set1_ps(ray.sx), _mm256_set1_ps(ray.sy), _mm256_set1_ps(ray.sz)],
-            t_min8: _mm256_set1_ps(t_min),
+            org: [ray.org[ray.kx], ray.org[ray.ky], ray.org[ray.kz]],
             t_min,
             row: [4 * ray.kx, 4 * ray.ky, 4 * ray.kz],
             ray,
         }
+    }
+
+    /// The permuted origin and the shear constants `S_x, S_y, S_z`, eight lanes each.
+    #[inline(always)]
+    unsafe fn splats(&self) -> ([__m256; 3], [__m256; 3]) {
+        let b = |x: &f32| _mm256_broadcast_ss(x);
+        let r = self.ray;
+        ([b(&self.org[0]), b(&self.org[1]), b(&self.org[2])], [b(&r.sx), b(&r.sy), b(&r.sz)])
     }
 }
 
@@ -95,7 +97,8 @@ pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32
         [row(1, rx), row(1, ry), row(1, rz)],
         [row(2, rx), row(2, ry), row(2, rz)],
     );
-    let (e, z) = sheared_edges(p0, p1, p2, r.o, r.s);
+    let (o, sh) = r.splats();
+    let (e, z) = sheared_edges(p0, p1, p2, o, sh);
     if _mm256_movemask_ps(any_zero(e)) as u32 & lanes != 0 {
         // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
         return edge_fallback(r, a, b, lanes, t_max);
@@ -109,7 +112,7 @@ pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32
     // Hit distance (step 4); NaN lanes (unused) fail both range tests.
     let (t, u, v) = hit_distance(e, z);
     let in_range = _mm256_and_ps(
-        _mm256_cmp_ps::<_CMP_GE_OQ>(t, r.t_min8),
+        _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_broadcast_ss(&r.t_min)),
         _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
     );
     let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), lane_mask(lanes));

@@ -2,6 +2,7 @@
 //! (thesis 4.2.5) with their cumulative sums, built per record in parallel.
 
 use super::optimize::RecordParams;
+use super::sampler::SamplerSetup;
 use super::search::{KdTree, Neighbours};
 use super::{CacheParams, CachePoint, RecordValues, Region, Technique, VplSet, TECHNIQUES};
 use filtrace_core::{luminance, Rgb, Vec3};
@@ -261,18 +262,14 @@ pub struct ImportanceCache {
     pub(crate) tree: KdTree,
     pub(crate) config: CacheParams,
     pub(crate) vpl_count: usize,
+    /// What the samplers read of `config` per shading point.
+    pub(crate) setup: SamplerSetup,
 }
 
 impl ImportanceCache {
     /// A cache without records: every sampler falls back to `uniform`.
     pub fn empty(vpl_count: usize, config: &CacheParams) -> Self {
-        ImportanceCache {
-            records: Vec::new(),
-            params: Vec::new(),
-            tree: KdTree::default(),
-            config: config.clone(),
-            vpl_count,
-        }
+        ImportanceCache::from_parts(Vec::new(), Vec::new(), KdTree::default(), config, vpl_count)
     }
 
     /// Evaluates every VPL at every point (per record in parallel; the result does not
@@ -308,10 +305,21 @@ impl ImportanceCache {
                 CacheRecord::new(point, region.radius, region.normal_cone, values)
             })
             .collect();
-        let mut cache =
-            ImportanceCache { records, params: Vec::new(), tree, config: config.clone(), vpl_count };
+        let mut cache = ImportanceCache::from_parts(records, Vec::new(), tree, config, vpl_count);
         cache.params = cache.initial_params(previous);
         Ok(cache)
+    }
+
+    /// The cache of these parts (`params` one per record or empty).
+    pub(crate) fn from_parts(
+        records: Vec<CacheRecord>,
+        params: Vec<RecordParams>,
+        tree: KdTree,
+        config: &CacheParams,
+        vpl_count: usize,
+    ) -> Self {
+        let setup = SamplerSetup::new(config);
+        ImportanceCache { records, params, tree, config: config.clone(), vpl_count, setup }
     }
 
     /// A priori parameters, or those of `previous` interpolated at each record.

@@ -19,11 +19,45 @@
 use super::alpha_max::AlphaMaxSet;
 use super::feedback::SampleFeedback;
 use super::search::Neighbours;
-use super::{ImportanceCache, SamplerKind, Technique, MAX_NEIGHBOURS, TECHNIQUES};
+use super::{CacheParams, ImportanceCache, SamplerKind, Technique, MAX_NEIGHBOURS, TECHNIQUES};
 use filtrace_core::Rgb;
 
 /// Most draws in one plan (α-max: one per distribution).
 pub const MAX_DRAWS: usize = TECHNIQUES;
+
+/// What the one-sample samplers read of the configuration at every shading point,
+/// gathered once per cache (the same values as computed per point).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SamplerSetup {
+    /// The enabled techniques, in order.
+    techniques: [Technique; TECHNIQUES],
+    count: usize,
+    /// `balance` and `balance-cv`'s α and β of every record.
+    prior_alpha: [f32; TECHNIQUES],
+    prior_beta: [f32; TECHNIQUES],
+}
+
+impl SamplerSetup {
+    pub(crate) fn new(config: &CacheParams) -> Self {
+        let mut techniques = [Technique::Uniform; TECHNIQUES];
+        let mut count = 0;
+        for t in config.distributions.techniques() {
+            techniques[count] = t;
+            count += 1;
+        }
+        SamplerSetup {
+            techniques,
+            count,
+            prior_alpha: config.prior_mixture(),
+            prior_beta: super::optimize::prior_beta(&config.distributions),
+        }
+    }
+
+    #[inline]
+    fn techniques(&self) -> &[Technique] {
+        &self.techniques[..self.count]
+    }
+}
 
 /// One VPL to evaluate and its weight in the estimate.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -140,22 +174,17 @@ impl ImportanceCache {
     }
 
     /// `α_l` and `β_l` of each neighbour slot: fixed a priori or the record's optimised.
+    #[inline]
     fn slot_weights(
         &self,
         nb: &Neighbours,
         optimized: bool,
     ) -> ([[f32; TECHNIQUES]; MAX_NEIGHBOURS], [[f32; TECHNIQUES]; MAX_NEIGHBOURS]) {
-        let (mut alpha, mut beta) =
-            ([[0.0; TECHNIQUES]; MAX_NEIGHBOURS], [[0.0; TECHNIQUES]; MAX_NEIGHBOURS]);
+        let setup = &self.setup;
+        let (mut alpha, mut beta) = ([setup.prior_alpha; MAX_NEIGHBOURS], [setup.prior_beta; MAX_NEIGHBOURS]);
         if optimized {
             for (s, (l, _)) in nb.iter().enumerate() {
                 (alpha[s], beta[s]) = (self.params[l].mixture(), self.params[l].beta);
-            }
-        } else {
-            let prior =
-                (self.config.prior_mixture(), super::optimize::prior_beta(&self.config.distributions));
-            for (a, b) in alpha.iter_mut().zip(&mut beta).take(nb.len()) {
-                (*a, *b) = prior;
             }
         }
         (alpha, beta)
@@ -166,12 +195,12 @@ impl ImportanceCache {
     fn sample_one(&self, plan: &mut SamplePlan, optimized: bool, cv: bool, next: &mut impl FnMut() -> f32) {
         let nb = plan.neighbours;
         let (alpha, beta) = self.slot_weights(&nb, optimized);
-        let techniques = self.config.distributions;
+        let techniques = self.setup.techniques();
         // Pick (l, k) with probability w_l α_lk, then j ~ p_lk.
         let u = next();
         let (mut acc, mut chosen) = (0.0f32, None);
         'pick: for (s, (l, w)) in nb.iter().enumerate() {
-            for t in techniques.techniques() {
+            for &t in techniques {
                 let pk = w * alpha[s][t as usize];
                 if pk > 0.0 {
                     chosen = Some((l, t));
@@ -192,7 +221,7 @@ impl ImportanceCache {
         let rows = self.neighbour_pmfs(&nb, j);
         for (s, (l, w)) in nb.iter().enumerate() {
             let r = &self.records[l];
-            for t in techniques.techniques() {
+            for &t in techniques {
                 let (k, p) = (t as usize, rows[s][t as usize]);
                 d.pdf += w * alpha[s][k] * p;
                 // Only the learning sampler's feedback reads them.

@@ -28,14 +28,17 @@ use crate::cache::{
     place_on_surfaces, CacheParams, ImportanceCache, OptimizeStats, SampleFeedback, SampleHistory,
     SamplerKind,
 };
+use filtrace_accel::{HitPacket, RayPacket, LANES};
 use filtrace_core::sampler::Sampler;
-use filtrace_core::{Image, Ray, Rgb};
+use filtrace_core::{Image, Ray, Rgb, Vec3};
 use filtrace_render::film::FilmPixel;
 use filtrace_render::integrator::path::visible_surface;
 use filtrace_render::integrator::tiles::trace_tile;
 use filtrace_render::integrator::{
-    CameraSample, FrameContext, Integrator, PassEnd, PathContext, PathParams, Split, Tile,
+    CameraSample, FrameContext, Integrator, PassEnd, PathContext, PathParams, Split, Tile, SLOT_PIXEL,
 };
+use filtrace_render::surface::SurfaceInteraction;
+use filtrace_render::RayQueries;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::Instant;
@@ -203,14 +206,35 @@ impl VplIntegrator {
         ray: &Ray,
         sampler: &mut Sampler,
         want: bool,
+        feedback: Option<&mut Vec<SampleFeedback>>,
+    ) -> (CameraSample, Option<f32>) {
+        match (cache, self.settings.ground_truth) {
+            (Some(cache), false) => {
+                let hit = ctx.intersect(ray);
+                self.shade_hit(cache, ctx, ray, hit, sampler, want, feedback)
+            }
+            _ => {
+                let (radiance, surface) = exhaustive_pixel(ctx, &self.frame.vpls, ray);
+                (CameraSample { radiance, surface: want.then_some(surface) }, None)
+            }
+        }
+    }
+
+    /// [`VplIntegrator::shade`] of a camera ray whose closest hit is `hit` (`None`: it
+    /// missed), traced by the caller.
+    #[allow(clippy::too_many_arguments)]
+    fn shade_hit(
+        &self,
+        cache: &ImportanceCache,
+        ctx: &PathContext,
+        ray: &Ray,
+        hit: Option<SurfaceInteraction>,
+        sampler: &mut Sampler,
+        want: bool,
         mut feedback: Option<&mut Vec<SampleFeedback>>,
     ) -> (CameraSample, Option<f32>) {
         let vpls = &self.frame.vpls;
-        let (Some(cache), false) = (cache, self.settings.ground_truth) else {
-            let (radiance, surface) = exhaustive_pixel(ctx, vpls, ray);
-            return (CameraSample { radiance, surface: want.then_some(surface) }, None);
-        };
-        let Some(si) = ctx.intersect(ray) else {
+        let Some(si) = hit else {
             let direct = ctx.lights.environment_radiance(ray.dir);
             let radiance = Split { direct, indirect: Rgb::ZERO };
             return (CameraSample { radiance, surface: want.then(Default::default) }, None);
@@ -238,6 +262,115 @@ impl VplIntegrator {
         }
         let sample = CameraSample { radiance: l, surface: want.then(|| visible_surface(ctx, &si)) };
         (sample, nb.closest_distance())
+    }
+
+    /// `trace_tile`'s loop (the pixels in order, each pixel's samples in a row, the same
+    /// samplers and rays) with the camera rays traced eight at a time by the packet
+    /// query, whose hits are the single-ray query's bit for bit; the samples are then
+    /// shaded and added in that order, so the film and the feedback are unchanged.
+    fn shade_tile(
+        &self,
+        cache: &ImportanceCache,
+        tile: &Tile,
+        pixels: &mut [FilmPixel],
+        mut feedback: Option<&mut Vec<SampleFeedback>>,
+    ) -> bool {
+        let mut batch = CameraBatch::new();
+        for i in 0..pixels.len() {
+            let (x, y) = ((i % tile.width) as u32, (tile.y0 + i / tile.width) as u32);
+            let key = Sampler::pixel_key(x, y, tile.seed);
+            for index in tile.first..tile.end {
+                if tile.cancel.load(Ordering::Relaxed) {
+                    return false;
+                }
+                batch.push(tile, i, key, index);
+                if batch.len == LANES {
+                    self.shade_batch(cache, tile, &mut batch, pixels, feedback.as_deref_mut());
+                }
+            }
+        }
+        self.shade_batch(cache, tile, &mut batch, pixels, feedback);
+        true
+    }
+
+    /// Traces the batch's camera rays as one packet, then shades and adds its samples in
+    /// order (as `trace_tile` adds them); empties the batch.
+    fn shade_batch(
+        &self,
+        cache: &ImportanceCache,
+        tile: &Tile,
+        batch: &mut CameraBatch,
+        pixels: &mut [FilmPixel],
+        mut feedback: Option<&mut Vec<SampleFeedback>>,
+    ) {
+        let ctx = &tile.ctx;
+        let hits = batch.trace(tile);
+        for lane in 0..std::mem::take(&mut batch.len) {
+            let (ray, i, want) = (batch.rays[lane], batch.pixel[lane], batch.want & (1 << lane) != 0);
+            let hit =
+                hits.lane(lane).and_then(|h| SurfaceInteraction::from_hit(ctx.scene, ctx.geometry, &ray, &h));
+            let sampler = &mut batch.samplers[lane];
+            let (s, closest) = self.shade_hit(cache, ctx, &ray, hit, sampler, want, feedback.as_deref_mut());
+            let pixel = tile.y0 * tile.width + i;
+            if let (true, Some(d), Some(slot)) = (want, closest, self.frame.closest.get(pixel)) {
+                slot.store(d.to_bits(), Ordering::Relaxed);
+            }
+            let px = &mut pixels[i];
+            if let Some(surface) = s.surface {
+                px.surface = surface;
+            }
+            px.add(&s.radiance.to_pixel_sample());
+        }
+    }
+}
+
+/// Up to [`LANES`] camera samples of a tile, in `trace_tile`'s order, and their rays.
+struct CameraBatch {
+    len: usize,
+    /// Index of each sample's pixel among the tile's pixels.
+    pixel: [usize; LANES],
+    /// Each sample's sampler after the pixel jitter (slot [`SLOT_PIXEL`]).
+    samplers: [Sampler; LANES],
+    rays: [Ray; LANES],
+    /// Bit `lane` set for the pixel's sample 0 (its visible surface is asked for).
+    want: u8,
+}
+
+impl CameraBatch {
+    fn new() -> Self {
+        let sampler = Sampler::from_pixel_key(0, 0);
+        let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+        CameraBatch {
+            len: 0,
+            pixel: [0; LANES],
+            samplers: [(); LANES].map(|_| sampler.clone()),
+            rays: [ray; LANES],
+            want: 0,
+        }
+    }
+
+    /// Adds sample `index` of pixel `i` of the tile (whose `Sampler::pixel_key` is `key`):
+    /// the sampler and ray `trace_tile` makes for it.
+    fn push(&mut self, tile: &Tile, i: usize, key: u32, index: u32) {
+        let (x, y) = ((i % tile.width) as u32, (tile.y0 + i / tile.width) as u32);
+        let lane = self.len;
+        let mut sampler = Sampler::from_pixel_key(key, index);
+        sampler.set_slot(SLOT_PIXEL);
+        let jitter = sampler.next_2d();
+        self.rays[lane] = tile.camera.sample_ray(x, y, index, jitter);
+        self.samplers[lane] = sampler;
+        self.pixel[lane] = i;
+        self.want = (self.want & !(1 << lane)) | (u8::from(index == 0) << lane);
+        self.len += 1;
+    }
+
+    /// The closest hits of the batch's rays (the renderer's packet or per-lane queries).
+    fn trace(&self, tile: &Tile) -> HitPacket {
+        let (rays, active) = RayPacket::from_rays(&self.rays[..self.len]);
+        match tile.lanes.queries {
+            RayQueries::Packet => tile.ctx.accel.intersect_packet(&rays, active),
+            RayQueries::PerLane => tile.ctx.accel.intersect_packet_lanes(&rays, active),
+        }
     }
 }
 
@@ -273,9 +406,9 @@ impl Integrator for VplIntegrator {
         self.shade(cache.as_ref(), ctx, ray, sampler, want, None).0
     }
 
-    /// The default tile loop with the cache locked once per tile and, for `optimized`, the
-    /// tile's feedback handed over at its end. Sample 0's closest record distance is kept
-    /// for `cache_distance`.
+    /// The default tile loop with the cache locked once per tile, the camera rays traced
+    /// in packets (`shade_tile`) and, for `optimized`, the tile's feedback handed over at
+    /// its end. Sample 0's closest record distance is kept for `cache_distance`.
     fn render_tile(&self, tile: &Tile, pixels: &mut [FilmPixel]) -> bool {
         let learn = self.learns();
         let mut feedback = match learn {
@@ -284,21 +417,14 @@ impl Integrator for VplIntegrator {
             }
             false => Vec::new(),
         };
-        // `trace_tile` takes the pixels in order, each pixel's samples in a row.
-        let per_pixel = (tile.end - tile.first).max(1) as usize;
-        let mut calls = 0usize;
         let done = {
             let cache = self.frame.cache.read().unwrap_or_else(PoisonError::into_inner);
-            trace_tile(tile, pixels, |ray, sampler, want| {
-                let pixel = tile.y0 * tile.width + calls / per_pixel;
-                calls += 1;
-                let fb = learn.then_some(&mut feedback);
-                let (sample, closest) = self.shade(cache.as_ref(), &tile.ctx, ray, sampler, want, fb);
-                if let (true, Some(d), Some(slot)) = (want, closest, self.frame.closest.get(pixel)) {
-                    slot.store(d.to_bits(), Ordering::Relaxed);
-                }
-                sample
-            })
+            match (cache.as_ref(), self.settings.ground_truth) {
+                (Some(cache), false) => self.shade_tile(cache, tile, pixels, learn.then_some(&mut feedback)),
+                _ => trace_tile(tile, pixels, |ray, sampler, want| {
+                    self.shade(None, &tile.ctx, ray, sampler, want, None).0
+                }),
+            }
         };
         // The cache's lock is released first: `end_pass` takes the two the other way round.
         if learn && done {
@@ -396,6 +522,49 @@ mod tests {
     use filtrace_core::Vec2;
     use filtrace_render::{RenderSettings, Renderer};
     use std::sync::atomic::AtomicBool;
+
+    /// The tile loop that traces the camera rays in packets adds every pixel's samples
+    /// as `trace_tile` with one `li` per sample (a single-ray query each) does, bit for
+    /// bit: an image whose width is not a multiple of 8 and several samples per pixel, so
+    /// that packets span pixels and rows; per-lane queries give the same film.
+    #[test]
+    fn packet_camera_rays_give_the_film_of_one_ray_per_sample() {
+        let (w, h, spp) = (21u32, 13u32, 3u32);
+        let settings = RenderSettings { width: w, height: h, spp, max_depth: 8, seed: 5 };
+        for (sampler, queries) in [
+            (SamplerKind::Balance, RayQueries::Packet),
+            (SamplerKind::BalanceCv, RayQueries::Packet),
+            (SamplerKind::AlphaMax, RayQueries::PerLane),
+        ] {
+            let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
+            let mut r = Renderer::new(scene, settings.clone()).expect("settings").with_ray_queries(queries);
+            let vs = VplSettings {
+                vpls: VplParams { count: 128, direct: 16, ..VplParams::thesis() },
+                sampler,
+                cache: CacheParams { cache_points: 40, ..CacheParams::default() },
+                ground_truth: false,
+            };
+            let frame = render_vpl_frame(&mut r, &vs, spp, &AtomicBool::new(false)).unwrap().unwrap();
+            let integrator = r.integrator_as::<VplIntegrator>().unwrap();
+            let (ctx, params) = (r.context(), r.path_params());
+            for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
+                let mut want = FilmPixel::default();
+                for index in 0..spp {
+                    let mut sampler = Sampler::new(x, y, index, settings.seed);
+                    sampler.set_slot(SLOT_PIXEL);
+                    let ray = r.camera().sample_ray(x, y, index, sampler.next_2d());
+                    let s = integrator.li(&ctx, &params, &ray, &mut sampler, index == 0);
+                    if let Some(surface) = s.surface {
+                        want.surface = surface;
+                    }
+                    want.add(&s.radiance.to_pixel_sample());
+                }
+                let got = frame.film.pixel(x as usize, y as usize);
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "{sampler:?}, pixel ({x}, {y})");
+                assert_eq!(got.sum.map(f64::to_bits), want.sum.map(f64::to_bits));
+            }
+        }
+    }
 
     /// The d-distance layer kept from the shading's searches is the layer's definition, a
     /// search of its own through every pixel centre, bit for bit, whatever the spp.

@@ -159,5 +159,5 @@ fn restored_cache(state: &VplState, config: &crate::cache::CacheParams) -> Impor
     let positions: Vec<Vec3> = records.iter().map(|r| r.point.position).collect();
     let normals: Vec<Vec3> = records.iter().map(|r| r.point.normal).collect();
     let tree = KdTree::new(&positions, &normals, state.lambda as f32);
-    ImportanceCache { records, params, tree, config: config.clone(), vpl_count: 0 }
+    ImportanceCache::from_parts(records, params, tree, config, 0)
 }

@@ -73,8 +73,8 @@ pub struct BuildParams {
 
 /// Environment variable that sets [`BuildParams::spatial_split_budget`] of
 /// [`BuildParams::default`] (e.g. `FILTRACE_SPATIAL_SPLITS=0.3`): a measurement knob for
-/// `filtrace bench suite` and renders (0 turns them off); unset, empty or not a number:
-/// the preset's.
+/// `filtrace bench suite` and renders. Values as [`parse_spatial_splits`] reads them; unset
+/// or empty: the preset's; anything else: the preset's, with one warning per process.
 pub const SPATIAL_SPLITS_ENV: &str = "FILTRACE_SPATIAL_SPLITS";
 
 /// Extra references `balanced` and `high_quality` allow for spatial splits (a fraction of
@@ -170,11 +170,42 @@ impl Default for BuildParams {
     /// [`BuildParams::balanced`], with the spatial split budget from [`SPATIAL_SPLITS_ENV`]
     /// if set.
     fn default() -> Self {
-        let budget = std::env::var(SPATIAL_SPLITS_ENV).ok().and_then(|v| v.trim().parse::<f32>().ok());
-        let spatial_split_budget =
-            budget.filter(|b| b.is_finite() && *b >= 0.0).unwrap_or(SPATIAL_SPLIT_BUDGET);
-        Self { spatial_split_budget, ..Self::balanced() }
+        Self { spatial_split_budget: spatial_split_budget_from_env(), ..Self::balanced() }
     }
+}
+
+/// The spatial split budget a value of [`SPATIAL_SPLITS_ENV`] asks for: a number `>= 0` is
+/// the budget itself (`0`: none, `1`: up to one extra reference per reference); `off`,
+/// `false`, `no`: none; `on`, `true`, `yes` and the empty value: the presets' 0.3. `None`
+/// for anything else (negative, not finite, not a number).
+pub fn parse_spatial_splits(value: &str) -> Option<f32> {
+    let value = value.trim();
+    match value.to_ascii_lowercase().as_str() {
+        "off" | "false" | "no" => return Some(0.0),
+        "" | "on" | "true" | "yes" => return Some(SPATIAL_SPLIT_BUDGET),
+        _ => {}
+    }
+    value.parse::<f32>().ok().filter(|b| b.is_finite() && *b >= 0.0)
+}
+
+/// [`SPATIAL_SPLITS_ENV`]'s budget, the presets' when unset. A value it cannot read is
+/// not an error the builder can return (the variable is read deep inside scene loading):
+/// it warns once per process, naming the value and what is used instead.
+fn spatial_split_budget_from_env() -> f32 {
+    let Some(raw) = std::env::var_os(SPATIAL_SPLITS_ENV) else {
+        return SPATIAL_SPLIT_BUDGET;
+    };
+    if let Some(budget) = raw.to_str().and_then(parse_spatial_splits) {
+        return budget;
+    }
+    static WARNED: std::sync::Once = std::sync::Once::new();
+    WARNED.call_once(|| {
+        eprintln!(
+            "warning: {SPATIAL_SPLITS_ENV}={raw:?} is not a spatial split budget (a number >= 0, on or \
+             off): using the default {SPATIAL_SPLIT_BUDGET}"
+        )
+    });
+    SPATIAL_SPLIT_BUDGET
 }
 
 /// Deepest binary tree the builder makes; deeper nodes become leaves regardless of size
@@ -369,5 +400,33 @@ impl Ctx<'_> {
         }
         debug_assert!(i > 0 && i < prims.len(), "binned split left one side empty");
         i
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spatial_splits_values_are_budgets_switches_or_rejected() {
+        for (value, want) in [
+            ("0", 0.0),
+            ("0.3", 0.3),
+            (" 1 ", 1.0),
+            ("2", 2.0),
+            ("off", 0.0),
+            ("OFF", 0.0),
+            ("false", 0.0),
+            ("no", 0.0),
+            ("on", SPATIAL_SPLIT_BUDGET),
+            ("True", SPATIAL_SPLIT_BUDGET),
+            ("yes", SPATIAL_SPLIT_BUDGET),
+            ("", SPATIAL_SPLIT_BUDGET),
+        ] {
+            assert_eq!(parse_spatial_splits(value), Some(want), "{value:?}");
+        }
+        for value in ["-0.5", "nan", "inf", "abc", "0.3x", "o n"] {
+            assert_eq!(parse_spatial_splits(value), None, "{value:?}");
+        }
     }
 }

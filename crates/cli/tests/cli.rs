@@ -249,6 +249,27 @@ fn bench_render_reports_the_same_image_at_every_thread_count() {
     assert_eq!(rows[0]["mean_rgb"], rows[1]["mean_rgb"]);
 }
 
+/// `FILTRACE_SPATIAL_SPLITS` (read deep in the BVH builder): a value it cannot read renders
+/// with the default budget after one warning naming the value; `off` warns nothing. The
+/// image is the same either way (the BVH changes, the closest hits do not).
+#[test]
+fn unreadable_spatial_splits_value_warns_once_and_renders() {
+    let bench = |value: &str| {
+        let out = run(bin()
+            .args(["bench", "render", "--res", "16x8", "--spp", "1", "--threads", "1", "--json"])
+            .env("FILTRACE_SPATIAL_SPLITS", value));
+        assert!(out.status.success(), "FILTRACE_SPATIAL_SPLITS={value}: {}", stderr(&out));
+        let v: serde_json::Value =
+            serde_json::from_slice(&out.stdout).expect("bench render --json prints JSON");
+        (stderr(&out), v["rows"][0]["mean_rgb"].clone())
+    };
+    let (warned, mean) = bench("maybe");
+    assert_eq!(warned.matches("FILTRACE_SPATIAL_SPLITS=\"maybe\"").count(), 1, "{warned}");
+    let (quiet, mean_off) = bench("off");
+    assert!(!quiet.contains("FILTRACE_SPATIAL_SPLITS"), "{quiet}");
+    assert_eq!(mean, mean_off);
+}
+
 /// `bench animation` on a small meadow: every frame update is a top-level refit or
 /// rebuild (never a full one), and the animated frame renders as the same frame built
 /// still (the same mean colour up to the last bits: the still build merges every instance

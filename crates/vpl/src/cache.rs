@@ -49,6 +49,7 @@ pub use feedback::SampleFeedback;
 pub use history::{SampleHistory, StoredSample};
 pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, StepOutcome};
 pub use placement::{is_surface, place_cache_points, place_on_surfaces, GBufferView, ScreenSurfaces};
+pub(crate) use record::CDF_BLOCK;
 pub use record::{CacheRecord, ImportanceCache, VplCdf};
 pub use sampler::{sample_uniform_vpl, SamplePlan, VplDraw, MAX_DRAWS};
 pub use search::{cache_distance, KdTree, Nearest, Neighbours, MAX_NEIGHBOURS};

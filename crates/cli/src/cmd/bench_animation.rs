@@ -5,7 +5,7 @@
 
 use super::render::{parse_resolution, Resolution};
 use filtrace_render::frame_bench::{self, UpdateTimings};
-use filtrace_render::{RenderSettings, Renderer};
+use filtrace_render::Renderer;
 use serde::Serialize;
 use std::io::Write;
 
@@ -53,14 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.rounds > 0, "--rounds must be at least 1");
     anyhow::ensure!(args.threads != Some(0), "--threads must be at least 1");
     let scene = frame_bench::moving_object_scene(args.blades).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let settings = RenderSettings {
-        width: args.res.width,
-        height: args.res.height,
-        spp: args.spp,
-        max_depth: 8,
-        seed: 0,
-    };
-    settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let settings = args.res.settings(args.spp, 8, 0)?;
     let mut renderer = Renderer::new(scene.clone(), settings.clone()).map_err(|e| anyhow::anyhow!("{e}"))?;
     let update = frame_bench::time_updates(&mut renderer, frame_bench::FRAMES, args.rounds)?;
     let middle = frame_bench::FRAMES / 2;

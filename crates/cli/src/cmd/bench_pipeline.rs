@@ -17,18 +17,13 @@ use filtrace_pipeline::{FilterChoice, FrameTimings, PipelineSettings};
 use serde::Serialize;
 use std::io::Write;
 
-use super::render::{parse_resolution, Resolution};
-use super::render_args::TraceArg;
+use super::render_args::{BenchScene, TraceArg};
 use super::render_filtered::Pipeline;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Built-in scene name or scene file.
-    #[arg(default_value = "cornell")]
-    pub scene: String,
-    /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
-    #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
-    pub res: Resolution,
+    #[command(flatten)]
+    pub target: BenchScene,
     /// Eye samples per pixel (the guide ray included).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
@@ -122,13 +117,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .map(|t| t as usize)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-    let scene = filtrace_scene::load_scene(&a.scene)
-        .map_err(|e| anyhow::anyhow!("cannot load scene '{}': {e}", a.scene))?;
+    let scene = filtrace_scene::load_scene(&a.target.scene)
+        .map_err(|e| anyhow::anyhow!("cannot load scene '{}': {e}", a.target.scene))?;
     let triangles = scene.triangle_count();
     let settings = PipelineSettings {
         spp: a.spp,
         indirect_paths: a.indirect_paths,
-        ..PipelineSettings::interactive(a.res.width, a.res.height)
+        ..PipelineSettings::interactive(a.target.res.width, a.target.res.height)
     };
     let rows = a
         .filter
@@ -136,9 +131,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .map(|f| time_filter(&a, &pool, &scene, &settings, f, threads))
         .collect::<anyhow::Result<Vec<Row>>>()?;
     let report = Report {
-        scene: a.scene.clone(),
-        width: a.res.width,
-        height: a.res.height,
+        scene: a.target.scene.clone(),
+        width: a.target.res.width,
+        height: a.target.res.height,
         spp: a.spp,
         indirect_paths: a.indirect_paths,
         max_depth: a.max_depth,

@@ -1,19 +1,15 @@
 //! `filtrace bench render [SCENE]`: path tracer throughput (samples per second) at each
 //! thread count, with the mean colour as a check that the same image was timed.
 
-use super::render::{parse_resolution, Resolution};
-use filtrace_render::{render_bench, RenderSettings, Renderer};
+use super::render_args::BenchScene;
+use filtrace_render::{render_bench, Renderer};
 use serde::Serialize;
 use std::io::Write;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene: a built-in name or a file.
-    #[arg(default_value = "cornell")]
-    pub scene: String,
-    /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
-    #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
-    pub res: Resolution,
+    #[command(flatten)]
+    pub target: BenchScene,
     /// Samples per pixel of each timed render.
     #[arg(long, default_value_t = 8)]
     pub spp: u32,
@@ -49,15 +45,8 @@ struct Report {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scene = filtrace_scene::load_scene(&args.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let settings = RenderSettings {
-        width: args.res.width,
-        height: args.res.height,
-        spp: args.spp,
-        max_depth: args.max_depth,
-        seed: 0,
-    };
-    settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let scene = filtrace_scene::load_scene(&args.target.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let settings = args.target.res.settings(args.spp, args.max_depth, 0)?;
     let renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut threads = args.threads.clone();
     if threads.is_empty() {
@@ -79,8 +68,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .collect();
     let report = Report {
-        scene: args.scene.clone(),
-        res: args.res.to_string(),
+        scene: args.target.scene.clone(),
+        res: args.target.res.to_string(),
         spp: args.spp,
         max_depth: args.max_depth,
         triangles: renderer.triangle_count(),

@@ -129,14 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         args.scenes.clone()
     };
-    let settings = RenderSettings {
-        width: args.res.width,
-        height: args.res.height,
-        spp: args.spp,
-        max_depth: args.max_depth,
-        seed: 0,
-    };
-    settings.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let settings = args.res.settings(args.spp, args.max_depth, 0)?;
     if let Some(dir) = &args.dump_scene_json {
         return dump_all(&names, dir);
     }

@@ -2,8 +2,8 @@
 //! cache placement + evaluation, shading, optimisation) for each sampler, by default the
 //! issue's setting: 512x512, 1 spp, 2048 VPLs, 1024 cache points, all cores.
 
-use super::render::{parse_resolution, Resolution};
-use filtrace_render::{RenderSettings, Renderer};
+use super::render_args::BenchScene;
+use filtrace_render::Renderer;
 use filtrace_vpl::cache::{CacheParams, SamplerKind};
 use filtrace_vpl::vpls::{render_vpl_frame, StageTimes, VplParams, VplSettings};
 use serde::Serialize;
@@ -12,11 +12,8 @@ use std::sync::atomic::AtomicBool;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene: a built-in name or a file.
-    #[arg(default_value = "cornell")]
-    pub scene: String,
-    #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
-    pub res: Resolution,
+    #[command(flatten)]
+    pub target: BenchScene,
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
     #[arg(long, default_value_t = 2048)]
@@ -47,14 +44,8 @@ struct Row {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scene = filtrace_scene::load_scene(&args.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let settings = RenderSettings {
-        width: args.res.width,
-        height: args.res.height,
-        spp: args.spp,
-        max_depth: 8,
-        seed: 0,
-    };
+    let scene = filtrace_scene::load_scene(&args.target.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let settings = args.target.res.settings(args.spp, 8, 0)?;
     let mut renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let samplers: Vec<SamplerKind> = if args.samplers.is_empty() {
         SamplerKind::ALL.to_vec()
@@ -98,15 +89,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         writeln!(
             o,
             "{}",
-            serde_json::json!({ "scene": args.scene, "res": args.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "repeat": args.repeat.max(1), "threads": rayon::current_num_threads(), "rows": rows })
+            serde_json::json!({ "scene": args.target.scene, "res": args.target.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "repeat": args.repeat.max(1), "threads": rayon::current_num_threads(), "rows": rows })
         )?;
         return Ok(());
     }
     writeln!(
         o,
         "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points, {} threads, median of {} (ms)\n",
-        args.scene,
-        args.res,
+        args.target.scene,
+        args.target.res,
         args.spp,
         args.vpls,
         args.cache_points,

@@ -78,11 +78,31 @@ impl TraceArg {
     }
 }
 
+/// The scene and resolution a benchmark renders (`bench render`, `pipeline`, `vpl`).
+#[derive(clap::Args)]
+pub struct BenchScene {
+    /// Scene: a built-in name or a file.
+    #[arg(default_value = "cornell")]
+    pub scene: String,
+    /// Resolution as WIDTHxHEIGHT, each side 1..=32768.
+    #[arg(long, default_value = "512x512", value_parser = parse_resolution)]
+    pub res: Resolution,
+}
+
 /// An image size parsed from `WxH`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Resolution {
     pub width: u32,
     pub height: u32,
+}
+
+impl Resolution {
+    /// Renderer settings at this resolution (validated).
+    pub fn settings(self, spp: u32, max_depth: i32, seed: u64) -> anyhow::Result<RenderSettings> {
+        let s = RenderSettings { width: self.width, height: self.height, spp, max_depth, seed };
+        s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+        Ok(s)
+    }
 }
 
 impl std::fmt::Display for Resolution {
@@ -115,15 +135,7 @@ impl CommonArgs {
 
     /// The renderer settings these options select (validated).
     pub fn settings(&self) -> anyhow::Result<RenderSettings> {
-        let s = RenderSettings {
-            width: self.res.width,
-            height: self.res.height,
-            spp: self.spp(),
-            max_depth: self.max_depth,
-            seed: self.seed,
-        };
-        s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
-        Ok(s)
+        self.res.settings(self.spp(), self.max_depth, self.seed)
     }
 
     /// `--spp`, or [`DEFAULT_SPP`].

@@ -15,13 +15,48 @@ pub(super) fn solve_lanes<const D: usize, const K1: usize>(
     inside: &V,
     o: &mut [V],
 ) {
+    let m = moments::<D, K1>(s, eps);
+    // A window counts when it holds fit pixels, is centred inside and its mean is finite.
+    let n = s[0];
+    let ok: [bool; S] =
+        std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0 && (0..3).all(|c| m.mp[c][l].is_finite()));
+    // `well`: every pivot at least eps / 2 (see the module docs) and finite coefficients,
+    // else the box mean.
+    let mut well = [true; S];
+    let (lm, rl) = cholesky(&m.sig, eps, &mut well);
+    let mut a_all = [[[0.0f32; S]; D]; 3];
+    let mut b_all = [[0.0f32; S]; 3];
+    for c in 0..3 {
+        let (a, b) = regress_channel(&lm, &rl, &m, c);
+        for l in 0..S {
+            well[l] &= b[l].is_finite() && a.iter().all(|a| a[l].is_finite());
+        }
+        (a_all[c], b_all[c]) = (a, b);
+    }
+    write_coefficients(&a_all, &b_all, &m.mp, &ok, &well, o);
+}
+
+/// `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
+#[inline(always)]
+fn fms(c: V, a: V, b: V) -> V {
+    vsub(c, vmul(a, b))
+}
+
+/// The window statistics the regression reads, per lane: the guide means, `Sigma_k + eps U`,
+/// the colour means and `cov_k(I, p)`.
+struct Moments<const D: usize> {
+    mi: [V; D],
+    sig: [[V; D]; D],
+    mp: [V; 3],
+    cov: [[V; 3]; D],
+}
+
+/// The [`Moments`] of 16 windows from their sums `s` (empty windows divide by 1).
+#[inline(always)]
+fn moments<const D: usize, const K1: usize>(s: &[V; K1], eps: &[f32; D]) -> Moments<D> {
     let kp = 1 + D + D * (D + 1) / 2; // index of m p
     let kc = kp + 3; // index of m I p
-
-    // `c - a b` lane by lane (the same rounding as the scalar solve: no fused multiply-add).
-    let fms = |c: V, a: V, b: V| -> V { vsub(c, vmul(a, b)) };
-    let n = s[0];
-    let inv: V = n.map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });
+    let inv: V = s[0].map(|n| 1.0 / if n >= 0.5 { n } else { 1.0 });
     let mut mi = [[0.0f32; S]; D];
     for a in 0..D {
         mi[a] = vmul(s[1 + a], inv);
@@ -44,9 +79,6 @@ pub(super) fn solve_lanes<const D: usize, const K1: usize>(
     for c in 0..3 {
         mp[c] = vmul(s[kp + c], inv);
     }
-    // A window counts when it holds fit pixels, is centred inside and its mean is finite.
-    let ok: [bool; S] =
-        std::array::from_fn(|l| n[l] >= 0.5 && inside[l] > 0.0 && (0..3).all(|c| mp[c][l].is_finite()));
     // cov_k(I, p)
     let mut cov = [[[0.0f32; S]; 3]; D];
     for a in 0..D {
@@ -54,9 +86,17 @@ pub(super) fn solve_lanes<const D: usize, const K1: usize>(
             cov[a][c] = fms(vmul(s[kc + a * 3 + c], inv), mi[a], mp[c]);
         }
     }
-    // Cholesky Sigma = L L^T (SPD: the diagonal holds at least eps > 0); rl = 1 / L_jj.
-    // `well`: every pivot at least eps / 2 (see the module docs), else the box mean.
-    let mut well = [true; S];
+    Moments { mi, sig, mp, cov }
+}
+
+/// Cholesky `Sigma = L L^T` (SPD: the diagonal holds at least eps > 0): `L` below the
+/// diagonal and `rl = 1 / L_jj`. Clears `well` in lanes with a pivot below `eps / 2`.
+#[inline(always)]
+fn cholesky<const D: usize>(
+    sig: &[[V; D]; D],
+    eps: &[f32; D],
+    well: &mut [bool; S],
+) -> ([[V; D]; D], [V; D]) {
     let mut lm = [[[0.0f32; S]; D]; D];
     let mut rl = [[0.0f32; S]; D];
     for j in 0..D {
@@ -77,36 +117,47 @@ pub(super) fn solve_lanes<const D: usize, const K1: usize>(
             lm[i][j] = vmul(v, rl[j]);
         }
     }
-    let mut a_all = [[[0.0f32; S]; D]; 3];
-    let mut b_all = [[0.0f32; S]; 3];
-    for c in 0..3 {
-        // L y = cov_c, then L^T a = y.
-        let mut y = [[0.0f32; S]; D];
-        for i in 0..D {
-            let mut v = cov[i][c];
-            for k in 0..i {
-                v = fms(v, lm[i][k], y[k]);
-            }
-            y[i] = vmul(v, rl[i]);
+    (lm, rl)
+}
+
+/// The coefficients of colour channel `c`: `a = Sigma^-1 cov_c` (`L y = cov_c`, then
+/// `L^T a = y`) and `b = mean p_c - a . mean I`.
+#[inline(always)]
+fn regress_channel<const D: usize>(lm: &[[V; D]; D], rl: &[V; D], m: &Moments<D>, c: usize) -> ([V; D], V) {
+    let mut y = [[0.0f32; S]; D];
+    for i in 0..D {
+        let mut v = m.cov[i][c];
+        for k in 0..i {
+            v = fms(v, lm[i][k], y[k]);
         }
-        let mut a = [[0.0f32; S]; D];
-        for i in (0..D).rev() {
-            let mut v = y[i];
-            for k in i + 1..D {
-                v = fms(v, lm[k][i], a[k]);
-            }
-            a[i] = vmul(v, rl[i]);
-        }
-        let mut b = mp[c];
-        for i in 0..D {
-            b = fms(b, a[i], mi[i]);
-        }
-        for l in 0..S {
-            well[l] &= b[l].is_finite() && a.iter().all(|a| a[l].is_finite());
-        }
-        (a_all[c], b_all[c]) = (a, b);
+        y[i] = vmul(v, rl[i]);
     }
-    // Out: zeros; ill-conditioned: the box mean (a = 0, b = mean p).
+    let mut a = [[0.0f32; S]; D];
+    for i in (0..D).rev() {
+        let mut v = y[i];
+        for k in i + 1..D {
+            v = fms(v, lm[k][i], a[k]);
+        }
+        a[i] = vmul(v, rl[i]);
+    }
+    let mut b = m.mp[c];
+    for i in 0..D {
+        b = fms(b, a[i], m.mi[i]);
+    }
+    (a, b)
+}
+
+/// `o = [1, a (a*3+c), b (c)]` per lane; windows that do not count: zeros;
+/// ill-conditioned ones: the box mean (a = 0, b = mean p).
+#[inline(always)]
+fn write_coefficients<const D: usize>(
+    a_all: &[[V; D]; 3],
+    b_all: &[V; 3],
+    mp: &[V; 3],
+    ok: &[bool; S],
+    well: &[bool; S],
+    o: &mut [V],
+) {
     let pick = |v: V, fallback: V| -> V {
         std::array::from_fn(|l| {
             if !ok[l] {

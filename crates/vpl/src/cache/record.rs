@@ -116,7 +116,7 @@ impl CacheRecord {
 /// Cells per block of [`VplCdf`]'s coarse index: a draw reads the index (2048 VPLs: 64
 /// values, 4 cache lines, shared by all draws from the record) and one block of 32 CDF
 /// values (2 lines) instead of a binary search over the whole table (~7 cold lines).
-const CDF_BLOCK: usize = 32;
+pub(crate) const CDF_BLOCK: usize = 32;
 
 /// A weight as the distributions count it: non-finite and negative ones are 0.
 #[inline]

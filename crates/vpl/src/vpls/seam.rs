@@ -24,7 +24,7 @@ use super::eval::Receiver;
 use super::integrator::{StageTimes, VplIntegrator, VplSettings};
 use super::state::VplState;
 use super::{Vpl, Vpls};
-use crate::cache::{CacheRecord, RecordParams, SampleFeedback, SamplerKind, StoredSample};
+use crate::cache::{CacheRecord, RecordParams, SampleFeedback, SamplerKind, StoredSample, CDF_BLOCK};
 use filtrace_core::{Image, Vec3};
 use filtrace_render::film::Film;
 use filtrace_render::memory::{bytes_of, image_bytes, MemoryEstimate};
@@ -150,9 +150,9 @@ pub fn frame_memory(
     let vpls = settings.vpls.count as u64 + 16;
     let cached = !settings.ground_truth && settings.sampler.needs_cache();
     let records = if cached { (settings.cache.cache_points as u64).min(pixels) } else { 0 };
-    // Three CDFs of `vpls + 1` values with a coarse index of one value per 32 cells; the
-    // record, its parameters and its search-tree entry (a point, a normal, ~16 bytes).
-    let per_record = bytes_of::<f32>(3 * (vpls + 1 + vpls.div_ceil(32)))
+    // Three CDFs of `vpls + 1` values with a coarse index of one value per block of cells;
+    // the record, its parameters and its search-tree entry (a point, a normal, ~16 bytes).
+    let per_record = bytes_of::<f32>(3 * (vpls + 1 + vpls.div_ceil(CDF_BLOCK as u64)))
         + bytes_of::<CacheRecord>(1)
         + bytes_of::<RecordParams>(1)
         + bytes_of::<Vec3>(2)

@@ -523,6 +523,16 @@ mod tests {
     use filtrace_render::{RenderSettings, Renderer};
     use std::sync::atomic::AtomicBool;
 
+    /// 128 VPLs (16 direct) and 40 cache points: a frame of a small test image.
+    fn small_settings(sampler: SamplerKind) -> VplSettings {
+        VplSettings {
+            vpls: VplParams { count: 128, direct: 16, ..VplParams::thesis() },
+            sampler,
+            cache: CacheParams { cache_points: 40, ..CacheParams::default() },
+            ground_truth: false,
+        }
+    }
+
     /// The tile loop that traces the camera rays in packets adds every pixel's samples
     /// as `trace_tile` with one `li` per sample (a single-ray query each) does, bit for
     /// bit: an image whose width is not a multiple of 8 and several samples per pixel, so
@@ -538,12 +548,7 @@ mod tests {
         ] {
             let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
             let mut r = Renderer::new(scene, settings.clone()).expect("settings").with_ray_queries(queries);
-            let vs = VplSettings {
-                vpls: VplParams { count: 128, direct: 16, ..VplParams::thesis() },
-                sampler,
-                cache: CacheParams { cache_points: 40, ..CacheParams::default() },
-                ground_truth: false,
-            };
+            let vs = small_settings(sampler);
             let frame = render_vpl_frame(&mut r, &vs, spp, &AtomicBool::new(false)).unwrap().unwrap();
             let integrator = r.integrator_as::<VplIntegrator>().unwrap();
             let (ctx, params) = (r.context(), r.path_params());
@@ -575,12 +580,7 @@ mod tests {
         let settings = RenderSettings { width: w, height: h, spp: 1, max_depth: 8, seed: 3 };
         let mut r = Renderer::new(scene, settings).expect("settings");
         for (sampler, spp) in [(SamplerKind::Balance, 1), (SamplerKind::Optimized, 3)] {
-            let vs = VplSettings {
-                vpls: VplParams { count: 128, direct: 16, ..VplParams::thesis() },
-                sampler,
-                cache: CacheParams { cache_points: 40, ..CacheParams::default() },
-                ground_truth: false,
-            };
+            let vs = small_settings(sampler);
             let frame = render_vpl_frame(&mut r, &vs, spp, &AtomicBool::new(false)).unwrap().unwrap();
             let cache = r.integrator_as::<VplIntegrator>().unwrap().cache().unwrap();
             let (ctx, layer) = (r.context(), frame.cache_distance);

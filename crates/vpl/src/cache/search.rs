@@ -291,11 +291,7 @@ impl KdTree {
             // Children beyond the limit are not pushed (NaN: kept); the rest in slot order:
             // the warm limit is close to the final one, so the order changes few visits,
             // and sorting the children cost more than it saved.
-            let mut open: u32 = 0;
-            for (c, &b) in bounds.iter().enumerate() {
-                open |= ((!(b > limit)) as u32) << c;
-            }
-            open &= node.used;
+            let mut open = lanes_within(&bounds, limit) & node.used;
             while open != 0 {
                 let c = open.trailing_zeros() as usize;
                 open &= open - 1;
@@ -309,11 +305,7 @@ impl KdTree {
     #[inline(always)]
     fn visit_leaf(&self, leaf: &Leaf, q: &Query, k: usize, limit: f32, out: &mut Nearest) {
         let d = leaf_distances(leaf, q, self.lambda);
-        let mut near: u32 = 0;
-        for (l, &d) in d.iter().enumerate() {
-            near |= ((!(d > limit)) as u32) << l;
-        }
-        near &= leaf.lanes;
+        let mut near = lanes_within(&d, limit) & leaf.lanes;
         while near != 0 {
             let l = near.trailing_zeros() as usize;
             near &= near - 1;
@@ -388,6 +380,16 @@ fn bounding_box(ids: &[u32], keys: &[[f32; 6]]) -> Box6 {
         }
     }
     (lo, hi)
+}
+
+/// Bit `i` set for each value not beyond `limit` (a NaN counts as within: it is kept).
+#[inline(always)]
+fn lanes_within(values: &[f32], limit: f32) -> u32 {
+    let mut mask = 0;
+    for (i, &v) in values.iter().enumerate() {
+        mask |= ((!(v > limit)) as u32) << i;
+    }
+    mask
 }
 
 /// [`cache_distance`] from the query to every lane of `leaf`, term by term in its order

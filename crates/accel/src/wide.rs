@@ -134,26 +134,46 @@ fn fill<const W: usize>(
 pub(crate) struct RayBoxes {
     org: [f32; 3],
     inv: [f32; 3],
-    /// Row of `Node4::bounds` holding the near plane per axis (`k` or `k + 3`).
-    near: [usize; 3],
+    /// Row of `Node4::bounds` holding the near plane per axis (`k` or `k + 3`), a row of
+    /// a constant table (see `octant_rows`).
+    near: &'static [usize; 3],
     /// Row holding the far plane per axis.
-    far: [usize; 3],
+    far: &'static [usize; 3],
+}
+
+/// Rows of `Node4::bounds` holding the near and far planes per axis, for each octant.
+static ROWS4: [[[usize; 3]; 8]; 2] = [octant_rows(1, false), octant_rows(1, true)];
+
+/// For each octant (bit `k` set: `dir[k]` negative), the offsets `stride * row` of the
+/// near (`far = false`) or far bound rows per axis, for nodes that store the minima in
+/// rows `0..3` and the maxima in rows `3..6`: a negative direction enters at the maximum.
+pub(crate) const fn octant_rows(stride: usize, far: bool) -> [[usize; 3]; 8] {
+    let mut rows = [[0; 3]; 8];
+    let mut octant = 0;
+    while octant < 8 {
+        let mut k = 0;
+        while k < 3 {
+            let negative = octant & (1 << k) != 0;
+            rows[octant][k] = stride * if negative != far { k + 3 } else { k };
+            k += 1;
+        }
+        octant += 1;
+    }
+    rows
 }
 
 impl RayBoxes {
     #[inline(always)]
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        let mut inv = [0.0; 3];
-        let mut near = [0; 3];
-        let mut far = [0; 3];
+        let (d, mut inv, mut octant) = (dir.to_array(), [0.0; 3], 0);
         for k in 0..3 {
-            inv[k] = 1.0 / dir[k];
+            inv[k] = 1.0 / d[k];
             // `inv[k] >= 0` exactly when `dir[k]` has no sign bit (valid rays have no NaN
             // components and `1 / d` never rounds to zero); testing `dir` keeps the rows
             // off the division's latency (as `avx2::RayBoxes8`).
-            (near[k], far[k]) = if dir[k].is_sign_positive() { (k, k + 3) } else { (k + 3, k) };
+            octant |= (d[k].is_sign_negative() as usize) << k;
         }
-        Self { org: origin.to_array(), inv, near, far }
+        Self { org: origin.to_array(), inv, near: &ROWS4[0][octant], far: &ROWS4[1][octant] }
     }
 }
 

@@ -1,7 +1,7 @@
 //! The 8-wide slab test of one ray against a node's eight child boxes, and the node
 //! layouts the traversal loop ([`super::traverse`]) runs over.
 
-use crate::wide::{cull_bound, Entry, Node8, FAR_SCALE};
+use crate::wide::{cull_bound, octant_rows, Entry, Node8, FAR_SCALE};
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 
@@ -19,15 +19,23 @@ use std::arch::x86_64::*;
 /// the `1 + 2 gamma_3` widening of the far distance as in Ize 2013. Zero direction
 /// components are replaced by `±10^-30` (a reciprocal of `±10^30`, finite, so a ray in a
 /// slab plane is inside that slab and a ray outside it is culled).
+///
+/// The row offsets are rows of a constant table picked by the direction's octant: one
+/// address per ray instead of six offsets worked out and stored (the loop reloads them
+/// either way: it has too few registers to keep them).
 #[derive(Clone, Copy)]
 pub(crate) struct RayBoxes8 {
     pub inv: [__m256; 3],
     /// `o inv + e` (near planes) and `o inv - e` (far planes).
     pub oinv_near: [__m256; 3],
     pub oinv_far: [__m256; 3],
-    pub near: [usize; 3],
-    pub far: [usize; 3],
+    pub near: &'static [usize; 3],
+    pub far: &'static [usize; 3],
 }
+
+/// Offsets (in floats) of the near and far bound rows of a `Node8` per axis, for each
+/// octant (bit `k` set: `dir[k]` negative, the far row first).
+static ROWS8: [[[usize; 3]; 8]; 2] = [octant_rows(8, false), octant_rows(8, true)];
 
 impl RayBoxes8 {
     /// The three axes at once in one SSE register (lane `k` = axis `k`; the same
@@ -49,10 +57,7 @@ impl RayBoxes8 {
         // `inv[k] >= 0` exactly when `d` has no sign bit (`d` is never zero or NaN and
         // `1 / d` never rounds to zero); testing `d` keeps the row offsets, which the
         // first node's loads need, off the division's latency.
-        let negative = _mm_movemask_ps(d) as usize;
-        let rows =
-            |k: usize| if negative & (1 << k) == 0 { (8 * k, 8 * (k + 3)) } else { (8 * (k + 3), 8 * k) };
-        let (r0, r1, r2) = (rows(0), rows(1), rows(2));
+        let octant = _mm_movemask_ps(d) as usize & 7;
         let splat = |v: __m128| {
             let v = _mm256_castps128_ps256(v);
             [0, 1, 2].map(|k| _mm256_permutevar8x32_ps(v, _mm256_set1_epi32(k)))
@@ -61,8 +66,8 @@ impl RayBoxes8 {
             inv: splat(inv),
             oinv_near: splat(lo),
             oinv_far: splat(hi),
-            near: [r0.0, r1.0, r2.0],
-            far: [r0.1, r1.1, r2.1],
+            near: &ROWS8[0][octant],
+            far: &ROWS8[1][octant],
         }
     }
 }

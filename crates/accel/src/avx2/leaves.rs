@@ -1,6 +1,6 @@
 //! Leaf tests of the 8-wide traversal: closest and any hit over ranges of packet pairs.
 
-use super::tri8::{test8v, Ray8};
+use super::tri8::{any8, test8v, Ray8};
 use super::Lanes8;
 use crate::tri4::{prefetch_packets, test4_scalar, Tri4};
 use crate::wide::{prefetch, Leaves};
@@ -139,11 +139,15 @@ impl Leaves for AnyPairs<'_> {
         while i < end {
             let j = if i + 1 < end { i + 1 } else { i };
             // SAFETY: `i <= j < end <= packets.len()`; AVX2 as in `ClosestPairs`.
+            // The ray's constants are read through `black_box`, so each test loads its
+            // splats where it uses them: hoisted out of the traversal loop, they were
+            // splatted and spilled on every query, leaf or not, and reloaded all the same.
+            let ray = std::hint::black_box(&self.ray);
             let hit = unsafe {
                 let (a, b) = (self.packets.get_unchecked(i), self.packets.get_unchecked(j));
-                _mm256_movemask_ps(test8v(&self.ray, a, b, 0xff, *t_max).hit)
+                any8(ray, a, b, *t_max)
             };
-            if hit != 0 {
+            if hit {
                 return true;
             }
             i += 2;
@@ -198,6 +202,10 @@ mod tests {
                 (test8(&r, &a, b, lanes, t_max), test8_scalar(&r, &a, b, lanes, t_max))
             };
             assert_eq!(fast.mask, slow.mask);
+            // The any-hit form (a lone packet tested as both halves) agrees with the mask.
+            // SAFETY: checked `has_avx2()` above.
+            let any = unsafe { any8(&Ray8::new(&WatertightRay::new(o, d), t_min), &a, b, t_max) };
+            assert_eq!(any, slow.mask != 0);
             for lane in 0..8 {
                 if fast.mask & (1 << lane) != 0 {
                     assert_eq!(

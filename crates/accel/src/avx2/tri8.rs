@@ -82,6 +82,52 @@ pub(crate) fn test8(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Hit
 /// division). Same operations, in the same order, as the SSE [`crate::tri4`] test.
 #[inline(always)]
 pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32) -> Lanes {
+    let (e, z) = edges8(r, a, b);
+    if _mm256_movemask_ps(any_zero(e)) as u32 & lanes != 0 {
+        // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
+        return edge_fallback(r, a, b, lanes, t_max);
+    }
+    // Outside when the edge functions have mixed signs. No used lane has a zero edge
+    // function here (those went to the fallback), so "some negative and some positive"
+    // is "the sign bits differ", and `det = U + V + W` of same-signed non-zero terms is
+    // never zero: the scalar test's `det == 0` rejection cannot trigger. Four operations
+    // instead of thirteen compares and ors, with the same decisions.
+    let reject = mixed_signs(e);
+    // Hit distance (step 4); NaN lanes (unused) fail both range tests.
+    let (t, u, v) = hit_distance(e, z);
+    let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range(r, t, t_max)), lane_mask(lanes));
+    Lanes { hit, t, u, v }
+}
+
+/// Whether any of the eight lanes of [`test8v`] (all used) hits: the same decisions, read
+/// off by one `vtestps` of the sign bits (the edge functions' mixed signs against the
+/// range test) instead of building the lane mask.
+#[inline(always)]
+pub(crate) unsafe fn any8(r: &Ray8, a: &Tri4, b: &Tri4, t_max: f32) -> bool {
+    let (e, z) = edges8(r, a, b);
+    if _mm256_movemask_ps(any_zero(e)) != 0 {
+        return _mm256_movemask_ps(edge_fallback(r, a, b, 0xff, t_max).hit) != 0;
+    }
+    let [u, v, w] = e;
+    let mixed = _mm256_or_ps(_mm256_xor_ps(u, v), _mm256_xor_ps(u, w));
+    let (t, _, _) = hit_distance(e, z);
+    // `testc` is set when no lane has the sign bit of `in_range` without that of `mixed`.
+    _mm256_testc_ps(mixed, in_range(r, t, t_max)) == 0
+}
+
+/// All ones where `t` lies in `[t_min, t_max]` (NaN lanes fail).
+#[inline(always)]
+unsafe fn in_range(r: &Ray8, t: __m256, t_max: f32) -> __m256 {
+    _mm256_and_ps(
+        _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_broadcast_ss(&r.t_min)),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
+    )
+}
+
+/// The edge functions and scaled corner depths of the eight triangles of packets `a`
+/// (low half) and `b` (high half) ([`sheared_edges`]).
+#[inline(always)]
+unsafe fn edges8(r: &Ray8, a: &Tri4, b: &Tri4) -> ([__m256; 3], [__m256; 3]) {
     let (pa, pb) = (a.v.as_ptr() as *const f32, b.v.as_ptr() as *const f32);
     let [rx, ry, rz] = r.row;
     // Packet `a` in the low half, `b` in the high half of each row.
@@ -98,25 +144,7 @@ pub(crate) unsafe fn test8v(r: &Ray8, a: &Tri4, b: &Tri4, lanes: u32, t_max: f32
         [row(2, rx), row(2, ry), row(2, rz)],
     );
     let (o, sh) = r.splats();
-    let (e, z) = sheared_edges(p0, p1, p2, o, sh);
-    if _mm256_movemask_ps(any_zero(e)) as u32 & lanes != 0 {
-        // Rare: a ray exactly on an edge needs the f64 recomputation of the scalar test.
-        return edge_fallback(r, a, b, lanes, t_max);
-    }
-    // Outside when the edge functions have mixed signs. No used lane has a zero edge
-    // function here (those went to the fallback), so "some negative and some positive"
-    // is "the sign bits differ", and `det = U + V + W` of same-signed non-zero terms is
-    // never zero: the scalar test's `det == 0` rejection cannot trigger. Four operations
-    // instead of thirteen compares and ors, with the same decisions.
-    let reject = mixed_signs(e);
-    // Hit distance (step 4); NaN lanes (unused) fail both range tests.
-    let (t, u, v) = hit_distance(e, z);
-    let in_range = _mm256_and_ps(
-        _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_broadcast_ss(&r.t_min)),
-        _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
-    );
-    let hit = _mm256_and_ps(_mm256_andnot_ps(reject, in_range), lane_mask(lanes));
-    Lanes { hit, t, u, v }
+    sheared_edges(p0, p1, p2, o, sh)
 }
 
 /// Translate, shear and scale the corners `a`, `b`, `c` (x, y, z rows, 8 lanes) into the

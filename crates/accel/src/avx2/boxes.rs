@@ -76,6 +76,13 @@ impl RayBoxes8 {
 /// `i`) and entry distances.
 #[inline(always)]
 pub(crate) unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+    // SAFETY: as `box8_within`.
+    unsafe { box8_within(n, r, t_min, _mm256_set1_ps(cull_bound(t_max))) }
+}
+
+/// [`box8`] with the cull bound `cull_bound(t_max)` splatted by the caller.
+#[inline(always)]
+pub(crate) unsafe fn box8_within(n: &Node8, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
     let b = n.bounds.as_ptr() as *const f32;
     // SAFETY: `Node8` is 64-byte aligned and its bound rows are 32 bytes, so every row is
     // 32-byte aligned; the row offsets are `8 * row` with `row < 6`.
@@ -95,7 +102,7 @@ pub(crate) unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -
     // infinite bounds give `±inf`, which fails the comparison as it should) may drop the
     // other slab of its pair, which only widens the box (conservative).
     let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
-    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(cull_bound(t_max)))));
+    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, cull)));
     let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32;
     (mask, t_near)
@@ -112,6 +119,16 @@ pub(crate) trait Node8Layout {
     /// (bit `i` for child `i`, empty slots never set) and entry distances. Safety: the
     /// caller runs with AVX2 and FMA.
     unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256);
+
+    /// [`Self::boxes`] given also `cull`, `cull_bound(t_max)` splatted, which the loop
+    /// works out again only when a leaf visit may have shortened `t_max` (at every node,
+    /// a closest-hit query spent 7 instructions on it). By default it is not used.
+    #[inline(always)]
+    unsafe fn boxes_within(&self, r: &RayBoxes8, t_min: __m256, t_max: f32, cull: __m256) -> (u32, __m256) {
+        let _ = cull;
+        // SAFETY: as `boxes`.
+        unsafe { self.boxes(r, t_min, t_max) }
+    }
 
     /// Child `i`: `(node index, 0)` for an inner node, `(first packet, packet count)` for
     /// a leaf.
@@ -132,6 +149,12 @@ impl Node8Layout for Node8 {
     unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
         // SAFETY: AVX2 and FMA (the caller's).
         unsafe { box8(self, r, t_min, t_max) }
+    }
+
+    #[inline(always)]
+    unsafe fn boxes_within(&self, r: &RayBoxes8, t_min: __m256, _: f32, cull: __m256) -> (u32, __m256) {
+        // SAFETY: AVX2 and FMA (the caller's).
+        unsafe { box8_within(self, r, t_min, cull) }
     }
 
     #[inline(always)]

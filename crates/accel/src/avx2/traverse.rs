@@ -117,6 +117,10 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
     let mut sp = 0usize;
     let mut cur = start;
     let mut t_near = Lanes8([0.0; 8]);
+    // The cull bound of `t_max`, which only a closest-hit leaf visit shortens (any hits
+    // never do; a stale bound would only keep more boxes).
+    let mut cull = cull_bound(*t_max);
+    let mut cull8 = _mm256_set1_ps(cull);
     loop {
         if cur.count == 0 {
             debug_assert!((cur.child as usize) < nodes.len());
@@ -124,7 +128,7 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             // `qwide::validate`).
             let node = unsafe { nodes.get_unchecked(cur.child as usize) };
             // SAFETY: this function runs with AVX2 (its target features).
-            let (mask, tn) = unsafe { node.boxes(r, t_min8, *t_max) };
+            let (mask, tn) = unsafe { node.boxes_within(r, t_min8, *t_max, cull8) };
             if mask != 0 {
                 // Any hits keep no distances, as Embree's occlusion stack (see the pop).
                 if ORDERED {
@@ -133,7 +137,7 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
                 }
                 let e = |i: usize| node.entry(i, if ORDERED { t_near.0[i] } else { 0.0 });
                 prefetch_children(nodes, node, mask, &leaves);
-                cur = if ORDERED && mask.count_ones() >= 3 {
+                cur = if ORDERED && three_or_more(mask) {
                     // SAFETY: AVX2 (this function's target features); at most 8 entries
                     // are pushed and `STACK8` leaves room for 7 per level.
                     unsafe { push_sorted8(mask, tn, node, &mut stack, &mut sp) }
@@ -153,6 +157,8 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
                     t_max,
                 )
             };
+            cull = cull_bound(*t_max);
+            cull8 = _mm256_set1_ps(cull);
         } else if leaves.visit(cur.child, cur.count, t_max) {
             return true;
         }
@@ -167,12 +173,20 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             let e = unsafe { stack.get_unchecked(sp).assume_init() };
             // Any hits: no distance test. `t_max` never shrinks; a box kept only by the
             // far-distance widening holds no hit in range, so the answer is the same.
-            if !ORDERED || e.t <= cull_bound(*t_max) {
+            if !ORDERED || e.t <= cull {
                 cur = e;
                 break;
             }
         }
     }
+}
+
+/// Whether `mask` has three or more bits set, without `count_ones` (a multiply chain
+/// where the `popcnt` feature is not enabled).
+#[inline(always)]
+fn three_or_more(mask: u32) -> bool {
+    let rest = mask & mask.wrapping_sub(1);
+    rest & rest.wrapping_sub(1) != 0
 }
 
 /// Starts fetching every child in `mask` while the order is worked out, without a branch
@@ -216,3 +230,15 @@ fn visit_leaf<L: Leaves>(leaves: &mut L, first: u32, count: u32, t_max: &mut f32
 }
 
 type VisitLeaf<L> = unsafe fn(&mut L, u32, u32, &mut f32) -> bool;
+
+#[cfg(test)]
+mod tests {
+    use super::three_or_more;
+
+    #[test]
+    fn three_or_more_is_a_count_of_at_least_three() {
+        for mask in 0..=u16::MAX as u32 {
+            assert_eq!(three_or_more(mask), mask.count_ones() >= 3, "{mask:#b}");
+        }
+    }
+}

@@ -76,17 +76,6 @@ impl SceneAccel {
     /// Bit i set iff lane i is active and occluded; per lane identical to `occluded`.
     pub fn occluded_packet(&self, rays: &RayPacket, active: u8) -> u8 {
         #[cfg(target_arch = "x86_64")]
-        let min_lanes = avx2_packet::MIN_PACKET_LANES;
-        #[cfg(not(target_arch = "x86_64"))]
-        let min_lanes = 0;
-        self.occluded_packet_split(rays, active, min_lanes)
-    }
-
-    /// [`SceneAccel::occluded_packet`] whose hybrid BVH traversal lets lanes go on alone
-    /// below subtrees fewer than `min_lanes` of them entered (`avx2_packet::hybrid`).
-    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
-    pub(crate) fn occluded_packet_split(&self, rays: &RayPacket, active: u8, min_lanes: u32) -> u8 {
-        #[cfg(target_arch = "x86_64")]
         if self.simd == Simd::Avx2 && active.count_ones() >= MIN_LANES_ANY {
             if let Some((object, transformed)) = self.single_object() {
                 let mut local = None;
@@ -103,7 +92,7 @@ impl SceneAccel {
                             // any other the hybrid one (docs/perf-accel.md, stop 16).
                             let (nodes, tris) = (&bvh.nodes, &bvh.tris);
                             avx2_packet::occluded_bvh(nodes, tris, rays, active).or_else(|| {
-                                let min = min_lanes;
+                                let min = avx2_packet::MIN_PACKET_LANES;
                                 Some(avx2_packet::occluded_hybrid(nodes, tris, rays, active, min))
                             })
                         }

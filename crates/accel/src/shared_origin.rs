@@ -85,11 +85,6 @@ pub fn fan_class(dir: Vec3) -> usize {
     octant | kz << 3
 }
 
-/// Fewest fan lanes that traverse a BVH subtree as a packet (the hybrid kernel's
-/// `min_lanes`). Fan lanes share their origin, so a lower value than the hybrid default
-/// (4) may pay; until measured it is that default (docs/many-light-cache.md, stop 19).
-const FAN_MIN_LANES: u32 = 4;
-
 /// Number of [`fan_class`] values.
 pub const FAN_CLASSES: usize = 24;
 
@@ -98,6 +93,6 @@ impl SceneAccel {
     /// to [`SceneAccel::occluded`]. A fan is a packet: the class sorting makes it one the
     /// packet kernels take (see the module docs).
     pub fn occluded_fan(&self, fan: &SegmentFan, active: u8) -> u8 {
-        self.occluded_packet_split(&fan.rays, active, FAN_MIN_LANES)
+        self.occluded_packet(&fan.rays, active)
     }
 }

@@ -1,5 +1,5 @@
-//! Rays, hit comparisons and the brute-force check shared by the accel tests (included with `#[path]`; not every
-//! file uses every helper).
+//! Rays, hit comparisons and the brute-force check shared by the accel tests (included
+//! with `#[path]`; not every file uses every helper).
 #![allow(dead_code)]
 
 use filtrace_accel::testmesh::SplitMix64;
@@ -40,13 +40,12 @@ pub fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
 /// many rays hit. A failure names `name`, the ray and every brute-force hit along it.
 pub fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
     let want: Vec<Option<Hit>> = rays.iter().map(|r| brute.intersect(r)).collect();
-    let all_hits = |ray: &Ray| brute.all_hits(ray);
     for (ray, &want) in rays.iter().zip(&want) {
         assert_eq!(
             bits(accel.intersect(ray)),
             bits(want),
             "{name}: ray {ray:?}; all hits {:?}",
-            all_hits(ray)
+            brute.all_hits(ray)
         );
         assert_eq!(accel.occluded(ray), want.is_some(), "{name}: occlusion of {ray:?}");
     }

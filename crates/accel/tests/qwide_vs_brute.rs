@@ -7,11 +7,11 @@
 mod rays;
 
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, RayPacket, SceneAccel, Simd, LANES};
+use filtrace_accel::{BruteForce, BuildParams, SceneAccel, Simd};
 use filtrace_core::shared_data::shared_path;
 use filtrace_core::{Ray, Vec3};
 use filtrace_scene::{Mesh, Scene};
-use rays::{bits, random_rays};
+use rays::{bits, check_rays, random_rays};
 
 fn single(mesh: Mesh) -> Scene {
     let mut s = Scene::default();
@@ -56,34 +56,12 @@ fn rays_with_surface_origins(scene: &Scene, brute: &BruteForce, n: usize, seed: 
     rays
 }
 
-/// Every ray: closest hit bit-identical to brute force, occlusion equal, and the same
-/// answers from 8-ray packets of consecutive rays; returns how many rays hit.
-fn check_against_brute(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
-    let mut hits = 0;
-    for ray in rays {
-        let (a, b) = (accel.intersect(ray), brute.intersect(ray));
-        assert_eq!(bits(a), bits(b), "{name}: ray {ray:?}; all hits {:?}", brute.all_hits(ray));
-        assert_eq!(accel.occluded(ray), b.is_some(), "{name}: occlusion of {ray:?}");
-        hits += b.is_some() as usize;
-    }
-    for chunk in rays.chunks(LANES) {
-        let (packet, active) = RayPacket::from_rays(chunk);
-        let (closest, occluded) =
-            (accel.intersect_packet(&packet, active), accel.occluded_packet(&packet, active));
-        for (i, ray) in chunk.iter().enumerate() {
-            assert_eq!(bits(closest.lane(i)), bits(accel.intersect(ray)), "{name}: packet lane {i} {ray:?}");
-            assert_eq!(occluded & (1 << i) != 0, accel.occluded(ray), "{name}: packet lane {i} {ray:?}");
-        }
-    }
-    hits
-}
-
 fn check_scene(scene: &Scene, n: usize, seed: u64) {
     let brute = BruteForce::build_like(scene, &SceneAccel::build(scene));
     let rays = rays_with_surface_origins(scene, &brute, n, seed);
     for (preset, params) in BuildParams::presets() {
         let Some(accel) = compressed(scene, &params) else { return };
-        let hits = check_against_brute(&accel, &brute, &rays, preset);
+        let hits = check_rays(&accel, &brute, &rays, preset);
         // Only meaningful when both outcomes occur often.
         assert!(
             hits > rays.len() / 10 && hits < rays.len() * 9 / 10,
@@ -141,7 +119,7 @@ fn instances_match_brute_force() {
         SceneAccel::build_with_moving(&s, &compress_all(&BuildParams::default()), Simd::Avx2, &moving);
     assert!(accel.stats().compressed_nodes > 0);
     let rays = rays_with_surface_origins(&s, &brute, 3000, 14);
-    check_against_brute(&accel, &brute, &rays, "instances");
+    check_rays(&accel, &brute, &rays, "instances");
 }
 
 /// The compressed and uncompressed 8-wide BVHs of a 1M-triangle mesh give the same hits on
@@ -162,5 +140,5 @@ fn million_triangles_match_the_uncompressed_bvh() {
     }
     let brute = BruteForce::build(&scene);
     let rays = rays_with_surface_origins(&scene, &brute, 200, 16);
-    check_against_brute(&accel, &brute, &rays, "1M triangles");
+    check_rays(&accel, &brute, &rays, "1M triangles");
 }

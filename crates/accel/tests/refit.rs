@@ -2,8 +2,11 @@
 //! refit or rebuild the BVH gives exactly the brute-force answers, over seeded random
 //! moves of many instances.
 
+#[path = "support/rays.rs"]
+mod rays;
+
 use filtrace_accel::testmesh::{self, SplitMix64};
-use filtrace_accel::{BruteForce, BuildParams, Hit, SceneAccel, Simd, TopLevelUpdate};
+use filtrace_accel::{BruteForce, BuildParams, SceneAccel, TopLevelUpdate};
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
 
@@ -49,20 +52,11 @@ fn random_rays(rng: &mut SplitMix64, n: usize) -> Vec<Ray> {
         .collect()
 }
 
-fn bits(h: Option<Hit>) -> Option<(u32, u32, u32, u32, u32)> {
-    h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.instance, h.prim))
-}
-
+/// `accel` is valid and agrees with brute force on `rays` (single rays and packets:
+/// `rays::check_rays`), with both outcomes common.
 fn check(accel: &SceneAccel, scene: &Scene, rays: &[Ray], what: &str) {
     accel.validate().unwrap_or_else(|e| panic!("{what}: {e}"));
-    let brute = BruteForce::build_like(scene, accel);
-    let mut hits = 0;
-    for ray in rays {
-        let b = brute.intersect(ray);
-        assert_eq!(bits(accel.intersect(ray)), bits(b), "{what}: closest hit of {ray:?}");
-        assert_eq!(accel.occluded(ray), b.is_some(), "{what}: occlusion of {ray:?}");
-        hits += b.is_some() as usize;
-    }
+    let hits = rays::check_rays(accel, &BruteForce::build_like(scene, accel), rays, what);
     assert!(hits > rays.len() / 10 && hits < rays.len() * 9 / 10, "{what}: {hits} of {} hit", rays.len());
 }
 
@@ -71,8 +65,7 @@ fn check(accel: &SceneAccel, scene: &Scene, rays: &[Ray], what: &str) {
 /// force, bit for bit, for both kernels.
 #[test]
 fn refits_and_rebuilds_agree_with_brute_force_over_random_moves() {
-    let kernels = if Simd::Avx2.available() { vec![Simd::Sse, Simd::Avx2] } else { vec![Simd::Sse] };
-    for simd in kernels {
+    for simd in rays::kernels() {
         let mut scene = scene();
         let movers: Vec<u32> = (2..2 + MOVERS).collect();
         let mut accel = SceneAccel::build_with_moving(&scene, &BuildParams::default(), simd, &movers);

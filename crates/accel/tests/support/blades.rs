@@ -1,8 +1,9 @@
-//! Thin blades, instanced, and the brute-force comparison of every query shared by the
-//! splitting tests (`presplit.rs`, `spatial_splits.rs`; included with `#[path]`).
+//! Thin blades, instanced, and rays at their corners and edges, shared by the splitting
+//! tests (`presplit.rs`, `spatial_splits.rs`; included with `#[path]`, beside
+//! `rays.rs`, whose `check_rays` they use).
 
-use crate::rays::bits;
-use filtrace_accel::{testmesh, BruteForce, RayPacket, SceneAccel, LANES};
+pub use crate::rays::check_rays;
+use filtrace_accel::testmesh;
 use filtrace_core::{Affine3A, Quat, Ray, Vec3};
 use filtrace_scene::{Instance, Scene};
 
@@ -19,28 +20,6 @@ pub fn instanced_blades() -> Scene {
     s.instances.push(place(0.7, Quat::from_rotation_y(0.8), Vec3::new(2.5, 0.2, 0.0)));
     s.instances.push(place(1.3, Quat::from_rotation_x(0.4), Vec3::new(-0.5, 0.5, 2.5)));
     s
-}
-
-/// Single-ray and packet queries of `accel` equal brute force on `rays`; returns the hits.
-pub fn check_rays(accel: &SceneAccel, brute: &BruteForce, rays: &[Ray], name: &str) -> usize {
-    let mut hits = 0;
-    for ray in rays {
-        let want = brute.intersect(ray);
-        assert_eq!(bits(accel.intersect(ray)), bits(want), "{name}: ray {ray:?}");
-        assert_eq!(accel.occluded(ray), want.is_some(), "{name}: occlusion of {ray:?}");
-        hits += want.is_some() as usize;
-    }
-    for chunk in rays.chunks(LANES) {
-        let (packet, active) = RayPacket::from_rays(chunk);
-        let (closest, occluded) =
-            (accel.intersect_packet(&packet, active), accel.occluded_packet(&packet, active));
-        for (i, ray) in chunk.iter().enumerate() {
-            let want = brute.intersect(ray);
-            assert_eq!(bits(closest.lane(i)), bits(want), "{name}: packet lane {i}, ray {ray:?}");
-            assert_eq!(occluded & (1 << i) != 0, want.is_some(), "{name}: packet occlusion of {ray:?}");
-        }
-    }
-    hits
 }
 
 /// Rays from above the blades at the corners, edge midpoints and centre of every triangle

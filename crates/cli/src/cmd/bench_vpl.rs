@@ -3,6 +3,7 @@
 //! issue's setting: 512x512, 1 spp, 2048 VPLs, 1024 cache points, all cores.
 
 use super::render_args::BenchScene;
+use super::render_vpl::{check_frame_memory, MAX_COUNT};
 use filtrace_render::Renderer;
 use filtrace_vpl::cache::{CacheParams, SamplerKind};
 use filtrace_vpl::vpls::{render_vpl_frame, StageTimes, VplParams, VplSettings};
@@ -16,10 +17,10 @@ pub struct Args {
     pub target: BenchScene,
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
-    #[arg(long, default_value_t = 2048)]
-    pub vpls: usize,
-    #[arg(long, default_value_t = 1024)]
-    pub cache_points: usize,
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
+    pub vpls: u32,
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
+    pub cache_points: u32,
     /// Frames per sampler; each stage reports its median over them (the first frame
     /// also pays for cold caches and page faults).
     #[arg(long, default_value_t = 1)]
@@ -44,9 +45,7 @@ struct Row {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scene = filtrace_scene::load_scene(&args.target.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
     let settings = args.target.res.settings(args.spp, 8, 0)?;
-    let mut renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let samplers: Vec<SamplerKind> = if args.samplers.is_empty() {
         SamplerKind::ALL.to_vec()
     } else {
@@ -56,15 +55,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .collect::<Result<_, _>>()
             .map_err(|e: String| anyhow::anyhow!(e))?
     };
+    let frame_settings = |sampler| VplSettings {
+        vpls: VplParams::with_count(args.vpls as usize),
+        sampler,
+        cache: CacheParams { cache_points: args.cache_points as usize, ..CacheParams::default() },
+        ground_truth: false,
+    };
+    // Before the scene is loaded: a frame too large for memory is refused, not swapped.
+    for &sampler in &samplers {
+        let (threads, max_pass) = (rayon::current_num_threads(), args.spp);
+        check_frame_memory(settings.width, settings.height, &frame_settings(sampler), threads, max_pass)?;
+    }
+    let scene = filtrace_scene::load_scene(&args.target.scene).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut renderer = Renderer::new(scene, settings).map_err(|e| anyhow::anyhow!("{e}"))?;
     let cancel = AtomicBool::new(false);
     let mut rows = Vec::new();
     for sampler in samplers {
-        let vs = VplSettings {
-            vpls: VplParams::with_count(args.vpls),
-            sampler,
-            cache: CacheParams { cache_points: args.cache_points, ..CacheParams::default() },
-            ground_truth: false,
-        };
+        let vs = frame_settings(sampler);
         let mut frames = Vec::new();
         for _ in 0..args.repeat.max(1) {
             let frame = render_vpl_frame(&mut renderer, &vs, args.spp, &cancel)

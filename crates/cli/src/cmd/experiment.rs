@@ -5,6 +5,7 @@
 //! cache). See `filtrace_eval::experiment` for the spec format and `experiments/` for
 //! checked-in specs; the many-light methods are in [`super::experiment_vpl`].
 
+use anyhow::Context;
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -189,6 +190,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .map(|p| ExperimentSpec::load(p).map(|s| (p.clone(), s)))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let threads = a
+        .threads
+        .map(|t| t as usize)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    for (path, spec) in &specs {
+        super::experiment_vpl::check_memory(spec, threads).with_context(|| path.display().to_string())?;
+    }
     let outs = output_dirs(&a.out, &specs)?;
     for out in &outs {
         std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", out.display()))?;
@@ -197,10 +205,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             filtrace_io::check_writable(out.join(name))?;
         }
     }
-    let threads = a
-        .threads
-        .map(|t| t as usize)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     // One reference cache for all the specs of the call: they share ground truths.
     let cache = a.out.join("cache");

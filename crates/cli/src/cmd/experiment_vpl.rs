@@ -62,6 +62,25 @@ pub fn vpl_settings(m: &VplMethod, scene_radius: f32) -> Result<VplSettings, Str
     Ok(s)
 }
 
+/// Refuses `spec` when a frame of one of its many-light methods (or of its exhaustive
+/// ground truth) would not fit in memory, naming the method: checked before anything
+/// runs, as `render` checks its frame ([`super::render_vpl::check_frame_memory`]).
+pub fn check_memory(spec: &ExperimentSpec, threads: usize) -> anyhow::Result<()> {
+    let max_spp = spec.spp.iter().copied().max().unwrap_or(1);
+    let truth = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, None, None, None);
+    let truth = spec.is_vpl_ground_truth().then(|| ("the ground truth".to_string(), truth, true));
+    let methods =
+        spec.methods.iter().filter_map(|m| Some((format!("method {}", m.name), spec.vpl_method(m)?, false)));
+    for (what, m, ground_truth) in methods.chain(truth) {
+        // The scene's radius only scales the clamp, which costs no memory.
+        let mut vs = vpl_settings(&m, 1.0).map_err(anyhow::Error::msg)?;
+        vs.ground_truth = ground_truth;
+        super::render_vpl::check_frame_memory(spec.width, spec.height, &vs, threads, max_spp)
+            .map_err(|e| anyhow::anyhow!("{what}: {e:#}"))?;
+    }
+    Ok(())
+}
+
 /// The `filtrace render` options of `m` (the distribution count has no option).
 pub fn cli_args(m: &VplMethod) -> Vec<String> {
     let mut a: Vec<String> = [

@@ -41,6 +41,10 @@ pub enum IntegratorArg {
     Vpl,
 }
 
+/// Most VPLs and most cache points an option may ask for (`render`, `bench vpl`; the
+/// experiment specs' limit too): beyond it the cache alone needs terabytes.
+pub const MAX_COUNT: i64 = 1_000_000;
+
 /// Options of the VPL integrator.
 #[derive(clap::Args, Debug, Clone)]
 pub struct VplArgs {
@@ -48,13 +52,13 @@ pub struct VplArgs {
     #[arg(long, value_enum, default_value_t = IntegratorArg::Path)]
     pub integrator: IntegratorArg,
     /// Number of VPLs (one eighth of them on the lights), as the thesis: 2048.
-    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
     pub vpls: u32,
     /// VPL sampler: uniform, alpha-max, balance, balance-cv or optimized.
     #[arg(long, default_value = "optimized", value_parser = parse_sampler)]
     pub vpl_sampler: SamplerKind,
     /// Cache points placed through the G-buffer.
-    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
     pub cache_points: u32,
     /// Records interpolated per shading point (M).
     #[arg(long, default_value_t = 2)]
@@ -117,14 +121,28 @@ impl VplArgs {
         let s = c.settings()?;
         // The scene's radius only scales --vpl-clamp, which costs no memory.
         let vs = self.settings(1.0)?;
-        let vpl = frame_memory(s.width, s.height, &vs, c.thread_count(), c.pass_spp());
-        let needs = filtrace_render::memory::plain_render(s.width, s.height).with_all(&vpl);
-        let needs = needs.with_hint(
-            "Lower --res, --vpls or --cache-points (the cache holds three distributions over the \
-             VPLs per cache point); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit",
-        );
-        filtrace_render::memory::check(&needs).map_err(anyhow::Error::msg)
+        check_frame_memory(s.width, s.height, &vs, c.thread_count(), c.pass_spp())
     }
+}
+
+/// Refuses a `width x height` VPL frame of `settings` on `threads` threads in passes of at
+/// most `max_pass` samples whose film, outputs and integrator buffers ([`frame_memory`])
+/// do not fit in memory, before anything is allocated (`render`, `bench vpl`, `experiment`).
+pub fn check_frame_memory(
+    width: u32,
+    height: u32,
+    settings: &VplSettings,
+    threads: usize,
+    max_pass: u32,
+) -> anyhow::Result<()> {
+    let vpl = frame_memory(width, height, settings, threads, max_pass);
+    let needs = filtrace_render::memory::plain_render(width, height).with_all(&vpl);
+    let needs = needs.with_hint(
+        "Lower --res, --vpls or --cache-points (the cache holds three distributions over the \
+         VPLs per cache point), or for `optimized` the samples per pass (--passes-spp: it keeps \
+         every sample of a pass); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit",
+    );
+    filtrace_render::memory::check(&needs).map_err(anyhow::Error::msg)
 }
 
 /// What stays the same from frame to frame of a VPL render; the integrator itself lives
@@ -169,6 +187,9 @@ pub struct Summary {
     png: PathBuf,
     nonfinite_samples: u64,
     pub cancelled: bool,
+    /// The scene loader's warnings (no light, default light, ...), as the path tracer's
+    /// summary lists them.
+    load_warnings: Vec<String>,
 }
 
 impl Summary {
@@ -269,6 +290,7 @@ impl VplRun<'_> {
             png: written.png,
             nonfinite_samples: frame.film.dropped_samples(),
             cancelled: frame.cancelled,
+            load_warnings: Vec::new(),
         }
     }
 }
@@ -291,8 +313,12 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     // Until the passes start, Ctrl-C exits at once and writes nothing.
     let ctrlc = CtrlC::install();
     let scene = c.load_scene().with_context(|| format!("cannot load scene '{}'", c.scene))?;
+    let load_warnings = scene.stats.warnings.clone();
     test_hook("loaded", ctrlc.flag());
     let out = c.prepare_output()?;
+    if !c.json {
+        load_warnings.iter().for_each(|w| eprintln!("warning: {w}"));
+    }
     let pool = c.thread_pool()?;
     let mut renderer =
         pool.install(|| Renderer::new(scene, settings.clone())).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -306,13 +332,14 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     test_hook("rendering", ctrlc.flag());
     let pixels = settings.width as u64 * settings.height as u64;
     let bar = progress_bar(pixels * settings.spp as u64, &format!("rendering {} (vpl)", c.scene_name()));
-    let Some(summary) = run.render_frame(&renderer, &out, &[], &bar)? else {
+    let Some(mut summary) = run.render_frame(&renderer, &out, &[], &bar)? else {
         eprintln!(
             "cancelled before every pixel had a sample: nothing written ({} left as it was)",
             out.display()
         );
         return Err(Interrupted.into());
     };
+    summary.load_warnings = load_warnings;
     print_summary(c, &summary)?;
     if summary.cancelled {
         eprintln!("{}", cancelled_note(&summary));

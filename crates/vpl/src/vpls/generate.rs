@@ -93,11 +93,15 @@ impl Stream {
 }
 
 /// The VPLs of a scene (see the module docs). Light paths that can hold no VPL (max
-/// depth 2: direct light only) are not traced.
+/// depth 2: direct light only) are not traced; max depth 1 (emission only) has no VPLs.
 pub fn generate_vpls(ctx: &PathContext, path: &PathParams, params: &VplParams) -> Vpls {
     let mut rng = Stream(SplitMix64::new(params.seed ^ 0x7670_6c5f_6765_6e21));
     let mut vpls = Vec::with_capacity(params.count + 16);
-    direct_vpls(ctx.lights, params.direct, &mut rng, &mut vpls);
+    // A direct VPL lights a shading point over two segments (light, point, camera): at
+    // max depth 1 only the emitters seen directly remain, and there are no VPLs.
+    if path.allows(2) {
+        direct_vpls(ctx.lights, params.direct, &mut rng, &mut vpls);
+    }
     let mut out = Vpls { vpls, light_paths: 0, bound: params.bound };
     let indirect = params.count.saturating_sub(out.vpls.len().max(params.direct));
     if indirect > 0 && path.allows(3) {

@@ -61,7 +61,7 @@ fn bad_vpl_options_name_the_option() {
         (vec!["--vpl-sampler", "nope"], "alpha-max"),
         (vec!["--vpls", "0"], "--vpls"),
         (vec!["--cache-neighbours", "9"], "cache neighbours"),
-        (vec!["--vpl-clamp", "-1"], "geometry bound"),
+        (vec!["--vpl-clamp", "-1"], "--vpl-clamp -1.0"),
     ] {
         let o = run(bin()
             .args(["render", "cornell", "--integrator", "vpl", "--res", "8x8", "--spp", "1"])

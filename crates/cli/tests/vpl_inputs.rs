@@ -125,3 +125,22 @@ fn experiment_refuses_a_vpl_method_too_large_for_memory() {
     );
     assert!(!dir.join("out").exists(), "nothing is written for a refused spec");
 }
+
+/// `--cache-neighbours` out of range is a usage error (exit 2) as the other counts are, and
+/// a `--vpl-clamp` too large for the scene names the value typed, not only the product.
+#[test]
+fn out_of_range_neighbours_and_clamp_name_the_value() {
+    let render = |args: &[&str]| {
+        let mut cmd = bin();
+        cmd.args(["render", "cornell", "--integrator", "vpl", "--res", "8x8", "--spp", "1"]).args(args);
+        run_within(&mut cmd, Duration::from_secs(60))
+    };
+    for m in ["0", "9"] {
+        let (code, err) = render(&["--cache-neighbours", m]);
+        assert_eq!(code, Some(2), "--cache-neighbours {m}: {err}");
+        assert!(err.contains(&format!("cache neighbours M = {m}")), "--cache-neighbours {m}: {err}");
+    }
+    let (code, err) = render(&["--vpl-clamp", "3e38"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--vpl-clamp 3e38") && !err.contains("panicked"), "{err}");
+}

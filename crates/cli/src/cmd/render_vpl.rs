@@ -19,7 +19,7 @@ use super::render_session::{progress_bar, test_hook, CtrlC, Interrupted};
 use anyhow::Context;
 use filtrace_core::Image;
 use filtrace_render::Renderer;
-use filtrace_vpl::cache::{CacheParams, SamplerKind};
+use filtrace_vpl::cache::{CacheParams, SamplerKind, MAX_NEIGHBOURS};
 use filtrace_vpl::vpls::seam::frame_memory;
 use filtrace_vpl::vpls::seam::resume_vpl_integrator;
 use filtrace_vpl::vpls::{
@@ -61,7 +61,7 @@ pub struct VplArgs {
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
     pub cache_points: u32,
     /// Records interpolated per shading point (M).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = parse_neighbours)]
     pub cache_neighbours: usize,
     /// Every VPL with exact visibility at every sample (the ground truth).
     #[arg(long)]
@@ -76,6 +76,16 @@ fn parse_sampler(s: &str) -> Result<SamplerKind, String> {
     s.parse()
 }
 
+/// M, checked as a usage error (the integrator's own check would exit 1 after parsing).
+fn parse_neighbours(s: &str) -> Result<usize, String> {
+    let m: usize = s.parse().map_err(|_| format!("{s:?} is not a whole number"))?;
+    if (1..=MAX_NEIGHBOURS).contains(&m) {
+        Ok(m)
+    } else {
+        Err(format!("cache neighbours M = {m} (expected 1..={MAX_NEIGHBOURS})"))
+    }
+}
+
 impl VplArgs {
     pub fn enabled(&self) -> bool {
         self.integrator == IntegratorArg::Vpl
@@ -86,7 +96,14 @@ impl VplArgs {
     pub fn settings(&self, radius: f32) -> anyhow::Result<VplSettings> {
         let mut vpls = VplParams::with_count(self.vpls as usize);
         if let Some(c) = self.vpl_clamp {
-            vpls.bound = GeometryBound::MinDistance(c * radius);
+            let d = c * radius;
+            if !(d.is_finite() && d > 0.0) {
+                anyhow::bail!(
+                    "--vpl-clamp {c:?}: times the scene's bounding radius {radius:?} it gives the distance \
+                     {d:?} (expected a finite value > 0)"
+                );
+            }
+            vpls.bound = GeometryBound::MinDistance(d);
         }
         let cache = CacheParams {
             cache_points: self.cache_points as usize,
@@ -139,8 +156,8 @@ pub fn check_frame_memory(
     let needs = filtrace_render::memory::plain_render(width, height).with_all(&vpl);
     let needs = needs.with_hint(
         "Lower --res, --vpls or --cache-points (the cache holds three distributions over the \
-         VPLs per cache point), or for `optimized` the samples per pass (--passes-spp: it keeps \
-         every sample of a pass); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit",
+         VPLs per cache point), or for `optimized` the samples per pass (`render --passes-spp`: it \
+         keeps every sample of a pass); set FILTRACE_MEMORY_LIMIT=bytes to test with another limit",
     );
     filtrace_render::memory::check(&needs).map_err(anyhow::Error::msg)
 }

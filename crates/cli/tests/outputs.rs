@@ -3,39 +3,19 @@
 //! full device ends in a clear exit (never a panic), and options that would give a wrong
 //! result silently (NaN exposure, zero indirect paths, an unknown filter) are refused.
 
+#[path = "support/run.rs"]
+mod run;
+
+use run::{bin, run_within, stderr};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_filtrace"))
-}
+use std::time::Duration;
 
 fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("filtrace-outputs-{tag}-{}", std::process::id()));
     std::fs::remove_dir_all(&d).ok();
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs `cmd` to its end, failing the test (and killing it) after `limit`: a check that
-/// should come before a long render must not wait for it.
-fn run_within(cmd: &mut Command, limit: Duration) -> Output {
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the binary runs");
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed() > limit {
-            child.kill().ok();
-            child.wait().ok();
-            panic!("still running after {limit:?}: the check did not come before the work");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
 }
 
 fn quick(cmd: &mut Command) -> Output {

@@ -6,27 +6,14 @@
 #[path = "support/run.rs"]
 mod run;
 
-use run::{bin, fresh_dir, json_lines, ok, stderr};
-use std::io::Read;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use run::{bin, fresh_dir, json_lines, ok, run_within, stderr};
+use std::process::Command;
+use std::time::Duration;
 
-/// `cmd`'s exit code and stderr, killed (and failed) when it runs longer than `limit`: a
-/// frame too large for memory must be refused at once, not allocated and rendered.
-fn run_within(cmd: &mut Command, limit: Duration) -> (Option<i32>, String) {
-    let mut child = cmd.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("filtrace runs");
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed() > limit {
-            child.kill().ok();
-            child.wait().ok();
-            panic!("{cmd:?} still running after {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let mut err = String::new();
-    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
-    (child.wait().unwrap().code(), err)
+/// `cmd`'s exit code and stderr, within `limit` ([`run_within`]).
+fn code_and_stderr(cmd: &mut Command, limit: Duration) -> (Option<i32>, String) {
+    let o = run_within(cmd, limit);
+    (o.status.code(), stderr(&o))
 }
 
 /// A TOML scene without any light renders black: the VPL render says so, as the path
@@ -100,7 +87,7 @@ fn bench_vpl_refuses_bad_counts_and_frames_too_large_for_memory() {
     let mut cmd = bin();
     cmd.args(["bench", "vpl", "cornell", "--res", "64x64", "--vpls", "1000000", "--cache-points", "100000"]);
     cmd.args(["--samplers", "balance"]).env("FILTRACE_MEMORY_LIMIT", "1G");
-    let (code, err) = run_within(&mut cmd, Duration::from_secs(30));
+    let (code, err) = code_and_stderr(&mut cmd, Duration::from_secs(30));
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("not enough memory") && err.contains("importance cache"), "{err}");
 }
@@ -117,7 +104,7 @@ fn experiment_refuses_a_vpl_method_too_large_for_memory() {
     std::fs::write(&spec, text).unwrap();
     let mut cmd = bin();
     cmd.arg("experiment").arg(&spec).arg("--out").arg(dir.join("out")).env("FILTRACE_MEMORY_LIMIT", "1G");
-    let (code, err) = run_within(&mut cmd, Duration::from_secs(30));
+    let (code, err) = code_and_stderr(&mut cmd, Duration::from_secs(30));
     assert_eq!(code, Some(1), "{err}");
     assert!(
         err.contains("huge.toml") && err.contains("method bal") && err.contains("not enough memory"),
@@ -133,7 +120,7 @@ fn out_of_range_neighbours_and_clamp_name_the_value() {
     let render = |args: &[&str]| {
         let mut cmd = bin();
         cmd.args(["render", "cornell", "--integrator", "vpl", "--res", "8x8", "--spp", "1"]).args(args);
-        run_within(&mut cmd, Duration::from_secs(60))
+        code_and_stderr(&mut cmd, Duration::from_secs(60))
     };
     for m in ["0", "9"] {
         let (code, err) = render(&["--cache-neighbours", m]);

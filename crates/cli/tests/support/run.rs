@@ -28,6 +28,22 @@ pub fn ok(o: Output) -> Output {
     o
 }
 
+/// Runs `cmd` to its end, failing the test (and killing it) after `limit`: a check that
+/// should come before a long render (or a large allocation) must not wait for it.
+pub fn run_within(cmd: &mut Command, limit: Duration) -> Output {
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the binary runs");
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            child.kill().ok();
+            child.wait().ok();
+            panic!("{cmd:?} still running after {limit:?}: the check did not come before the work");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// Every line of stdout as JSON.
 pub fn json_lines(o: &Output) -> Vec<serde_json::Value> {
     String::from_utf8_lossy(&o.stdout)

@@ -49,6 +49,8 @@ fn vpl_render_with_each_sampler_and_the_ground_truth() {
         for key in ["vpl_generation_ms", "cache_ms", "shading_ms", "optimisation_ms", "vpls", "mean_rgb"] {
             assert!(json.get(key).is_some(), "{sampler}: JSON lacks {key}: {json}");
         }
+        let cached = !matches!(sampler, "uniform" | "truth");
+        assert_eq!(json["cache_rays"].as_u64().unwrap() > 0, cached, "{sampler}: {json}");
         assert!(json["mean_rgb"][1].as_f64().unwrap() > 0.0, "{sampler}: black image");
         let exr = std::fs::read(&out).expect("EXR written");
         assert!(exr.windows(14).any(|w| w == b"cache_distance"), "{sampler}: no cache_distance layer");
@@ -62,6 +64,8 @@ fn bad_vpl_options_name_the_option() {
         (vec!["--vpls", "0"], "--vpls"),
         (vec!["--cache-neighbours", "9"], "cache neighbours"),
         (vec!["--vpl-clamp", "-1"], "--vpl-clamp -1.0"),
+        (vec!["--cache-faint-share", "1"], "cache faint share 1"),
+        (vec!["--cache-faint-share", "nan"], "not a finite number"),
     ] {
         let o = run(bin()
             .args(["render", "cornell", "--integrator", "vpl", "--res", "8x8", "--spp", "1"])
@@ -89,6 +93,31 @@ fn bench_vpl_prints_every_stage() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(json["rows"].as_array().unwrap().len(), 5, "{json}");
+}
+
+/// The faint share only moves rays from traced to faint: the records and the VPLs with a
+/// contribution are the same whatever the share.
+#[test]
+fn bench_vpl_faint_share_trades_rays_for_faint_vpls() {
+    let rows = |share: &str| {
+        let o = run(bin().args(["bench", "vpl", "cornell", "--res", "16x16", "--vpls", "128"]).args([
+            "--cache-points",
+            "16",
+            "--samplers",
+            "balance",
+            "--cache-faint-share",
+            share,
+            "--json",
+        ]));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        let row = &json["rows"][0];
+        (row["cache_rays"].as_u64().unwrap(), row["cache_faint_vpls"].as_u64().unwrap())
+    };
+    let (exact, none) = rows("0");
+    let (traced, faint) = rows("0.3");
+    assert_eq!(none, 0);
+    assert!(faint > 0 && traced + faint == exact, "{traced} + {faint} vs {exact}");
 }
 
 /// `--integrator vpl` renders in the path tracer's progressive passes: with `optimized`

@@ -36,6 +36,7 @@ sampler = "balance-cv"
 neighbours = 3
 distributions = 4
 cache_points = 32
+faint_share = 0.1
 
 [[methods]]
 name = "uniform"
@@ -57,12 +58,13 @@ fn vpl_fields_parse_with_their_defaults() {
             clamp: None,
             cache_points: 16,
             neighbours: 2,
-            distributions: 3
+            distributions: 3,
+            faint_share: DEFAULT_FAINT_SHARE,
         }
     );
     assert_eq!(
-        (m(1).sampler, m(1).neighbours, m(1).distributions, m(1).cache_points),
-        (VplSampler::BalanceCv, 3, 4, 32)
+        (m(1).sampler, m(1).neighbours, m(1).distributions, m(1).cache_points, m(1).faint_share),
+        (VplSampler::BalanceCv, 3, 4, 32, 0.1)
     );
     assert_eq!(spec.methods[2].kind_label(), "vpl-uniform");
     // Without `[vpl]` the renderer's defaults.
@@ -88,7 +90,7 @@ fn line_of(text: &str, needle: &str) -> usize {
 
 #[test]
 fn bad_vpl_fields_are_errors_naming_their_line() {
-    let cases: [(&str, &str, &str, &str); 11] = [
+    let cases: [(&str, &str, &str, &str); 13] = [
         // (what, replace, by, text on the line the error must name)
         ("unknown sampler", "sampler = \"uniform\"", "sampler = \"lightcuts\"", "lightcuts"),
         ("M = 0", "neighbours = 3", "neighbours = 0", "neighbours = 0"),
@@ -96,6 +98,8 @@ fn bad_vpl_fields_are_errors_naming_their_line() {
         ("no distributions", "distributions = 4", "distributions = 0", "distributions = 0"),
         ("five distributions", "distributions = 3", "distributions = 5", "distributions = 5"),
         ("no VPLs", "vpls = 64", "vpls = 0", "vpls = 0"),
+        ("faint share 1", "faint_share = 0.1", "faint_share = 1.0", "faint_share = 1.0"),
+        ("negative faint share", "faint_share = 0.1", "faint_share = -0.5", "faint_share = -0.5"),
         ("unknown key in [vpl]", "vpls = 64", "vpls = 64\nlights = 3", "lights = 3"),
         (
             "a reference spp with the ground truth",

@@ -32,6 +32,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod alpha_max;
+mod faint;
 mod feedback;
 mod history;
 mod optimize;
@@ -45,6 +46,7 @@ mod vpl_set;
 mod tests;
 
 pub use alpha_max::{alpha_max_owner, alpha_max_weight};
+pub use faint::FaintCut;
 pub use feedback::SampleFeedback;
 pub use history::{SampleHistory, StoredSample};
 pub use optimize::{newton_step, OptimizeStats, OptimizerParams, RecordParams, StepOutcome};
@@ -56,7 +58,7 @@ pub use search::{cache_distance, KdTree, Nearest, Neighbours, MAX_NEIGHBOURS};
 pub(crate) use vpl_set::RgbColumns;
 pub use vpl_set::{
     evaluate_each_vpl, relaxed_geometry_term, relaxed_geometry_term_fast, relaxed_geometry_term_towards,
-    RecordValues, Region, RelaxedReceiver, VplSet,
+    RecordValues, Region, RelaxedReceiver, VisibilityRays, VplSet,
 };
 
 use filtrace_core::Vec3;
@@ -197,6 +199,10 @@ impl std::str::FromStr for SamplerKind {
     }
 }
 
+/// Default [`CacheParams::faint_share`]: see docs/many-light-cache.md, "Faint VPLs without
+/// a ray", for the measurement that chose it.
+pub const DEFAULT_FAINT_SHARE: f32 = 0.02;
+
 /// Parameters of the cache and its samplers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CacheParams {
@@ -218,6 +224,11 @@ pub struct CacheParams {
     pub prior_alpha: [f32; TECHNIQUES],
     /// The per-record optimisation of `optimized`.
     pub optimizer: OptimizerParams,
+    /// At most this share of a record's unoccluded light may come from VPLs taken as
+    /// visible without a shadow ray, the faintest ones (`--cache-faint-share`; 0: every
+    /// VPL gets its ray, as in the thesis). Shapes only the full distribution E¹, so it
+    /// biases nothing ([`FaintCut`]).
+    pub faint_share: f32,
 }
 
 impl Default for CacheParams {
@@ -232,6 +243,7 @@ impl Default for CacheParams {
             // set of magic numbers.
             prior_alpha: [1.0 / 2.3, 0.5 / 2.3, 0.5 / 2.3, 0.3 / 2.3],
             optimizer: OptimizerParams::default(),
+            faint_share: DEFAULT_FAINT_SHARE,
         }
     }
 }
@@ -254,6 +266,9 @@ impl CacheParams {
             if self.distributions.contains(*t) && !(a.is_finite() && a > 0.0) {
                 return Err(format!("prior mixture weight of {} = {a} (expected > 0)", t.name()));
             }
+        }
+        if !(0.0..1.0).contains(&self.faint_share) {
+            return Err(format!("cache faint share {} (expected in [0, 1))", self.faint_share));
         }
         self.optimizer.validate(&self.distributions)
     }

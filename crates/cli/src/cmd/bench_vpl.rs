@@ -5,7 +5,7 @@
 use super::render_args::BenchScene;
 use super::render_vpl::{check_frame_memory, MAX_COUNT};
 use filtrace_render::Renderer;
-use filtrace_vpl::cache::{CacheParams, SamplerKind};
+use filtrace_vpl::cache::{CacheParams, SamplerKind, DEFAULT_FAINT_SHARE};
 use filtrace_vpl::vpls::{render_vpl_frame, StageTimes, VplParams, VplSettings};
 use serde::Serialize;
 use std::io::Write;
@@ -21,6 +21,9 @@ pub struct Args {
     pub vpls: u32,
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
     pub cache_points: u32,
+    /// See `render --cache-faint-share`.
+    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, value_parser = super::render_vpl::parse_faint_share)]
+    pub cache_faint_share: f32,
     /// Frames per sampler; each stage reports its median over them (the first frame
     /// also pays for cold caches and page faults).
     #[arg(long, default_value_t = 1)]
@@ -41,6 +44,9 @@ struct Row {
     shading_ms: f64,
     optimisation_ms: f64,
     total_ms: f64,
+    /// The cache's visibility rays, and the faint VPLs taken as visible without one.
+    cache_rays: u64,
+    cache_faint_vpls: u64,
     mean_rgb: [f64; 3],
 }
 
@@ -58,7 +64,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let frame_settings = |sampler| VplSettings {
         vpls: VplParams::with_count(args.vpls as usize),
         sampler,
-        cache: CacheParams { cache_points: args.cache_points as usize, ..CacheParams::default() },
+        cache: CacheParams {
+            cache_points: args.cache_points as usize,
+            faint_share: args.cache_faint_share,
+            ..CacheParams::default()
+        },
         ground_truth: false,
     };
     // Before the scene is loaded: a frame too large for memory is refused, not swapped.
@@ -88,6 +98,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             shading_ms: t.shading_ms,
             optimisation_ms: t.optimisation_ms,
             total_ms: t.vpl_generation_ms + t.cache_ms + t.shading_ms + t.optimisation_ms,
+            cache_rays: frames[0].cache_rays.traced,
+            cache_faint_vpls: frames[0].cache_rays.faint,
             mean_rgb: [mean[0], mean[1], mean[2]],
         });
     }
@@ -96,35 +108,39 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         writeln!(
             o,
             "{}",
-            serde_json::json!({ "scene": args.target.scene, "res": args.target.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "repeat": args.repeat.max(1), "threads": rayon::current_num_threads(), "rows": rows })
+            serde_json::json!({ "scene": args.target.scene, "res": args.target.res.to_string(), "spp": args.spp, "vpls": args.vpls, "cache_points": args.cache_points, "cache_faint_share": args.cache_faint_share, "repeat": args.repeat.max(1), "threads": rayon::current_num_threads(), "rows": rows })
         )?;
         return Ok(());
     }
     writeln!(
         o,
-        "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points, {} threads, median of {} (ms)\n",
+        "VPL frame, {} at {}, {} spp, {} VPLs, {} cache points (faint share {}), {} threads, median of {} (ms)\n",
         args.target.scene,
         args.target.res,
         args.spp,
         args.vpls,
         args.cache_points,
+        args.cache_faint_share,
         rayon::current_num_threads(),
         args.repeat.max(1)
     )?;
     writeln!(
         o,
-        "| sampler | VPLs | cache | shading | optimisation | total | mean G |\n|---|---|---|---|---|---|---|"
+        "| sampler | VPLs | cache | shading | optimisation | total | cache rays (faint) | mean G |\n\
+         |---|---|---|---|---|---|---|---|"
     )?;
     for r in &rows {
         writeln!(
             o,
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.4} |",
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} ({}) | {:.4} |",
             r.sampler,
             r.vpl_generation_ms,
             r.cache_ms,
             r.shading_ms,
             r.optimisation_ms,
             r.total_ms,
+            r.cache_rays,
+            r.cache_faint_vpls,
             r.mean_rgb[1]
         )?;
     }

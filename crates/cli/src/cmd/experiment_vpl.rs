@@ -67,7 +67,7 @@ pub fn vpl_settings(m: &VplMethod, scene_radius: f32) -> Result<VplSettings, Str
 /// runs, as `render` checks its frame ([`super::render_vpl::check_frame_memory`]).
 pub fn check_memory(spec: &ExperimentSpec, threads: usize) -> anyhow::Result<()> {
     let max_spp = spec.spp.iter().copied().max().unwrap_or(1);
-    let truth = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, None, None, None);
+    let truth = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, &Default::default());
     let truth = spec.is_vpl_ground_truth().then(|| ("the ground truth".to_string(), truth, true));
     let methods =
         spec.methods.iter().filter_map(|m| Some((format!("method {}", m.name), spec.vpl_method(m)?, false)));
@@ -89,6 +89,7 @@ pub fn cli_args(m: &VplMethod) -> Vec<String> {
         ("--vpl-sampler", m.sampler.name().to_string()),
         ("--cache-points", m.cache_points.to_string()),
         ("--cache-neighbours", m.neighbours.to_string()),
+        ("--cache-faint-share", m.faint_share.to_string()),
     ]
     .into_iter()
     .flat_map(|(k, v)| [k.to_string(), v])
@@ -266,7 +267,7 @@ fn still_vpls(vs: &VplSettings, spec: &ExperimentSpec) -> VplParams {
 
 /// The VPL settings of the ground truth (the sampler does not matter: only the VPLs).
 fn truth_settings(spec: &ExperimentSpec, r: &Renderer) -> Result<VplSettings, String> {
-    let m = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, None, None, None);
+    let m = spec.vpl.resolve(filtrace_eval::experiment::VplSampler::Uniform, &Default::default());
     vpl_settings(&m, r.lights().scene_radius())
 }
 
@@ -411,6 +412,7 @@ mod tests {
         assert_eq!(x::DEFAULT_CACHE_POINTS as usize, d.cache_points);
         assert_eq!(x::DEFAULT_NEIGHBOURS as usize, d.neighbours);
         assert_eq!(x::DEFAULT_DISTRIBUTIONS as usize, d.distributions.count());
+        assert_eq!(x::DEFAULT_FAINT_SHARE, d.faint_share);
         assert_eq!(x::VplSampler::ALL.len(), SamplerKind::ALL.len());
         for s in VplSampler::ALL {
             assert_eq!(s.name().parse::<SamplerKind>().unwrap().name(), s.name());
@@ -427,11 +429,12 @@ mod tests {
             cache_points: 77,
             neighbours: 3,
             distributions: 2,
+            faint_share: 0.25,
         };
         let s = vpl_settings(&m, 2.0).unwrap();
         assert_eq!(s.sampler, SamplerKind::BalanceCv);
         assert_eq!((s.vpls.count, s.vpls.direct), (1000, 125));
-        assert_eq!((s.cache.cache_points, s.cache.neighbours), (77, 3));
+        assert_eq!((s.cache.cache_points, s.cache.neighbours, s.cache.faint_share), (77, 3, 0.25));
         assert_eq!(s.cache.distributions, DistributionSet::first(1));
         assert_eq!(s.vpls.bound, filtrace_vpl::vpls::GeometryBound::MinDistance(0.02));
         assert!(!s.ground_truth);

@@ -38,11 +38,12 @@ pub struct Args {
 
 /// The options of the many-light renderer (clap id, flag, what it does): given without
 /// `--integrator vpl`, the path tracer would render and silently ignore them.
-const VPL_OPTIONS: [(&str, &str, &str); 6] = [
+const VPL_OPTIONS: [(&str, &str, &str); 7] = [
     ("vpls", "--vpls", "it sets the number of VPLs"),
     ("vpl_sampler", "--vpl-sampler", "it chooses how the importance cache samples the VPLs"),
     ("cache_points", "--cache-points", "it sets the importance cache's points"),
     ("cache_neighbours", "--cache-neighbours", "it sets the records interpolated per shading point"),
+    ("cache_faint_share", "--cache-faint-share", "it sets which VPLs a cache record takes as visible"),
     ("ground_truth", "--ground-truth", "it is the exhaustive sum over the VPLs"),
     ("vpl_clamp", "--vpl-clamp", "it bounds the VPLs' geometry term"),
 ];

@@ -19,7 +19,7 @@ use super::render_session::{progress_bar, test_hook, CtrlC, Interrupted};
 use anyhow::Context;
 use filtrace_core::Image;
 use filtrace_render::Renderer;
-use filtrace_vpl::cache::{CacheParams, SamplerKind, MAX_NEIGHBOURS};
+use filtrace_vpl::cache::{CacheParams, SamplerKind, DEFAULT_FAINT_SHARE, MAX_NEIGHBOURS};
 use filtrace_vpl::vpls::seam::frame_memory;
 use filtrace_vpl::vpls::seam::resume_vpl_integrator;
 use filtrace_vpl::vpls::{
@@ -63,6 +63,11 @@ pub struct VplArgs {
     /// Records interpolated per shading point (M).
     #[arg(long, default_value_t = 2, value_parser = parse_neighbours)]
     pub cache_neighbours: usize,
+    /// The faintest VPLs of a cache record, carrying together at most this share of its
+    /// unoccluded light, count as visible without a shadow ray (0: every ray traced, as
+    /// the thesis). Shapes only a sampling distribution: no bias.
+    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, value_parser = parse_faint_share)]
+    pub cache_faint_share: f32,
     /// Every VPL with exact visibility at every sample (the ground truth).
     #[arg(long)]
     pub ground_truth: bool,
@@ -74,6 +79,16 @@ pub struct VplArgs {
 
 fn parse_sampler(s: &str) -> Result<SamplerKind, String> {
     s.parse()
+}
+
+/// The faint share, in `[0, 1)`, checked as a usage error.
+pub fn parse_faint_share(s: &str) -> Result<f32, String> {
+    let v = super::args::finite_f32(s)?;
+    if (0.0..1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("cache faint share {v} (expected in [0, 1))"))
+    }
 }
 
 /// M, checked as a usage error (the integrator's own check would exit 1 after parsing).
@@ -108,6 +123,7 @@ impl VplArgs {
         let cache = CacheParams {
             cache_points: self.cache_points as usize,
             neighbours: self.cache_neighbours,
+            faint_share: self.cache_faint_share,
             ..CacheParams::default()
         };
         let s = VplSettings { vpls, sampler: self.vpl_sampler, cache, ground_truth: self.ground_truth };
@@ -127,8 +143,9 @@ impl VplArgs {
     pub fn stamp(&self, pass_spp: u32) -> String {
         let sampler = if self.ground_truth { "exhaustive" } else { self.vpl_sampler.name() };
         format!(
-            "vpl sampler={sampler} vpls={} cache_points={} neighbours={} clamp={:?} passes_spp={pass_spp}",
-            self.vpls, self.cache_points, self.cache_neighbours, self.vpl_clamp
+            "vpl sampler={sampler} vpls={} cache_points={} neighbours={} faint_share={} clamp={:?} \
+             passes_spp={pass_spp}",
+            self.vpls, self.cache_points, self.cache_neighbours, self.cache_faint_share, self.vpl_clamp
         )
     }
 
@@ -191,6 +208,10 @@ pub struct Summary {
     vpls: usize,
     light_paths: usize,
     cache_records: usize,
+    /// The cache's visibility rays, and the faint VPLs its records took as visible
+    /// without one (`--cache-faint-share`).
+    cache_rays: u64,
+    cache_faint_vpls: u64,
     vpl_generation_ms: f64,
     cache_ms: f64,
     shading_ms: f64,
@@ -296,6 +317,8 @@ impl VplRun<'_> {
             vpls: frame.vpls.len(),
             light_paths: frame.vpls.light_paths,
             cache_records: frame.cache_records,
+            cache_rays: frame.cache_rays.traced,
+            cache_faint_vpls: frame.cache_rays.faint,
             vpl_generation_ms: t.vpl_generation_ms,
             cache_ms: t.cache_ms,
             shading_ms: t.shading_ms,

@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub use super::vpl_spec::{
-    GroundTruth, Metric, VplMethod, VplSampler, VplSpec, DEFAULT_CACHE_POINTS, DEFAULT_DISTRIBUTIONS,
-    DEFAULT_NEIGHBOURS, MAX_COUNT, MAX_DISTRIBUTIONS, MAX_NEIGHBOURS,
+    GroundTruth, Metric, VplMethod, VplOverrides, VplSampler, VplSpec, DEFAULT_CACHE_POINTS,
+    DEFAULT_DISTRIBUTIONS, DEFAULT_FAINT_SHARE, DEFAULT_NEIGHBOURS, MAX_COUNT, MAX_DISTRIBUTIONS,
+    MAX_NEIGHBOURS,
 };
 
 /// Version of the cache key; bump when the renderer changes what a reference contains.
@@ -117,6 +118,10 @@ pub struct MethodSpec {
     /// Cache points per frame (default: `[vpl]`'s, else 2048).
     #[serde(default, deserialize_with = "super::vpl_spec::de_count")]
     pub cache_points: Option<u32>,
+    /// Share of a record's light its faint VPLs may carry without a visibility ray
+    /// (default: `[vpl]`'s, else 0.02; 0: every ray, as the thesis).
+    #[serde(default, deserialize_with = "super::vpl_spec::de_faint_share")]
+    pub faint_share: Option<f32>,
 }
 
 impl MethodSpec {
@@ -290,6 +295,7 @@ impl ExperimentSpec {
             ("neighbours", m.neighbours.is_some()),
             ("distributions", m.distributions.is_some()),
             ("cache_points", m.cache_points.is_some()),
+            ("faint_share", m.faint_share.is_some()),
         ];
         match m.sampler {
             None => {
@@ -348,7 +354,13 @@ impl ExperimentSpec {
 
     /// The many-light settings of `m` with the `[vpl]` defaults; `None` for path methods.
     pub fn vpl_method(&self, m: &MethodSpec) -> Option<VplMethod> {
-        Some(self.vpl.resolve(m.sampler?, m.neighbours, m.distributions, m.cache_points))
+        let own = VplOverrides {
+            neighbours: m.neighbours,
+            distributions: m.distributions,
+            cache_points: m.cache_points,
+            faint_share: m.faint_share,
+        };
+        Some(self.vpl.resolve(m.sampler?, &own))
     }
 
     /// The stable hash of everything that determines a scene's reference: the renderer

@@ -90,6 +90,8 @@ pub struct VplSpec {
     pub neighbours: Option<u32>,
     #[serde(default, deserialize_with = "de_distributions")]
     pub distributions: Option<u32>,
+    #[serde(default, deserialize_with = "de_faint_share")]
+    pub faint_share: Option<f32>,
 }
 
 impl Default for VplSpec {
@@ -100,6 +102,7 @@ impl Default for VplSpec {
             cache_points: None,
             neighbours: None,
             distributions: None,
+            faint_share: None,
         }
     }
 }
@@ -119,29 +122,37 @@ pub struct VplMethod {
     pub neighbours: u32,
     /// Uniform included, 1..=4.
     pub distributions: u32,
+    /// Share of a record's light its faint VPLs may carry without a visibility ray
+    /// (`--cache-faint-share`).
+    pub faint_share: f32,
+}
+
+/// A method's own cache settings, each over `[vpl]`'s and the renderer's defaults.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VplOverrides {
+    pub neighbours: Option<u32>,
+    pub distributions: Option<u32>,
+    pub cache_points: Option<u32>,
+    pub faint_share: Option<f32>,
 }
 
 /// Defaults of `filtrace render --integrator vpl` (`CacheParams::default()`).
 pub const DEFAULT_CACHE_POINTS: u32 = 2048;
 pub const DEFAULT_NEIGHBOURS: u32 = 2;
 pub const DEFAULT_DISTRIBUTIONS: u32 = 4;
+pub const DEFAULT_FAINT_SHARE: f32 = 0.02;
 
 impl VplSpec {
     /// A method's settings: its own, else these defaults, else the renderer's.
-    pub fn resolve(
-        &self,
-        sampler: VplSampler,
-        neighbours: Option<u32>,
-        distributions: Option<u32>,
-        cache_points: Option<u32>,
-    ) -> VplMethod {
+    pub fn resolve(&self, sampler: VplSampler, own: &VplOverrides) -> VplMethod {
         VplMethod {
             sampler,
             vpls: self.vpls,
             clamp: self.clamp,
-            cache_points: cache_points.or(self.cache_points).unwrap_or(DEFAULT_CACHE_POINTS),
-            neighbours: neighbours.or(self.neighbours).unwrap_or(DEFAULT_NEIGHBOURS),
-            distributions: distributions.or(self.distributions).unwrap_or(DEFAULT_DISTRIBUTIONS),
+            cache_points: own.cache_points.or(self.cache_points).unwrap_or(DEFAULT_CACHE_POINTS),
+            neighbours: own.neighbours.or(self.neighbours).unwrap_or(DEFAULT_NEIGHBOURS),
+            distributions: own.distributions.or(self.distributions).unwrap_or(DEFAULT_DISTRIBUTIONS),
+            faint_share: own.faint_share.or(self.faint_share).unwrap_or(DEFAULT_FAINT_SHARE),
         }
     }
 }
@@ -156,6 +167,14 @@ pub(super) fn de_distributions<'de, D: Deserializer<'de>>(d: D) -> Result<Option
 
 pub(super) fn de_count<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u32>, D::Error> {
     de_range(d, "cache_points", 1, MAX_COUNT)
+}
+
+pub(super) fn de_faint_share<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f32>, D::Error> {
+    let v = f64::deserialize(d)?;
+    if !(v.is_finite() && (0.0..1.0).contains(&v)) {
+        return Err(serde::de::Error::custom(format!("faint_share = {v} (expected in [0, 1))")));
+    }
+    Ok(Some(v as f32))
 }
 
 fn de_vpls<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {

@@ -4,7 +4,7 @@
 use super::optimize::RecordParams;
 use super::sampler::SamplerSetup;
 use super::search::{KdTree, Neighbours};
-use super::{CacheParams, CachePoint, RecordValues, Region, Technique, VplSet, TECHNIQUES};
+use super::{CacheParams, CachePoint, RecordValues, Region, Technique, VisibilityRays, VplSet, TECHNIQUES};
 use filtrace_core::{luminance, Rgb, Vec3};
 use rayon::prelude::*;
 
@@ -27,6 +27,8 @@ pub struct CacheRecord {
     /// RGB sums over the VPLs of E¹, E², E³; the uniform slot repeats E²'s (its control
     /// variate's scale: E⁴ = 1 carries no radiance of its own).
     totals: [Rgb; TECHNIQUES],
+    /// The visibility rays its evaluation traced and the faint VPLs it did without.
+    pub rays: VisibilityRays,
 }
 
 impl CacheRecord {
@@ -39,6 +41,7 @@ impl CacheRecord {
             normal_cone,
             distributions: VplCdf::three([&values.full, &values.unoccluded, &values.bounded]),
             totals: [t[0], t[1], t[2], t[1]],
+            rays: values.rays,
         }
     }
 
@@ -301,7 +304,7 @@ impl ImportanceCache {
             .enumerate()
             .map_init(RecordValues::default, |values, (i, &point)| {
                 let region = neighbourhood(&tree, &points, i, config.neighbours, scene_diagonal);
-                vpls.evaluate_record(&point, &region, values);
+                vpls.evaluate_record(&point, &region, config.faint_share, values);
                 CacheRecord::new(point, region.radius, region.normal_cone, values)
             })
             .collect();
@@ -345,6 +348,12 @@ impl ImportanceCache {
     /// The records.
     pub fn records(&self) -> &[CacheRecord] {
         &self.records
+    }
+
+    /// The visibility rays of every record's evaluation, and the faint VPLs taken as
+    /// visible without one.
+    pub fn visibility_rays(&self) -> VisibilityRays {
+        self.records.iter().map(|r| r.rays).fold(VisibilityRays::default(), |a, b| a + b)
     }
 
     /// The `optimized` sampler's parameters, one per record.

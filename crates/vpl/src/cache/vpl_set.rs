@@ -5,7 +5,7 @@
 //! visibility and combines them as the [`super::SamplePlan`] says. The cache only
 //! evaluates every VPL at every record, through this trait.
 
-use super::CachePoint;
+use super::{CachePoint, FaintCut};
 use filtrace_core::{luminance, Rgb, Vec3};
 
 /// The VPLs, seen from a cache record. Implemented by the `vpls` module (and by small
@@ -33,12 +33,13 @@ pub trait VplSet: Sync {
     /// receiver of the neighbourhood can receive light from the VPL.
     fn bounded(&self, vpl: usize, site: &CachePoint, region: &Region) -> Rgb;
 
-    /// Evaluates every VPL at one record into `out` (already sized to `vpl_count()`).
-    /// The default calls the three methods per VPL and casts a visibility ray only where
-    /// the unoccluded contribution is positive. Override it to trace the record's
-    /// visibility rays as a packet: they share the record's point as origin.
-    fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {
-        evaluate_each_vpl(self, site, region, out);
+    /// Evaluates every VPL at one record into `out`. The default calls the three methods
+    /// per VPL and casts a visibility ray only where the unoccluded contribution is
+    /// positive and not faint (the faintest VPLs, carrying at most `faint_share` of the
+    /// record's unoccluded light, count as visible: [`FaintCut`]). Override it to trace
+    /// the record's visibility rays as a packet: they share the record's point as origin.
+    fn evaluate_record(&self, site: &CachePoint, region: &Region, faint_share: f32, out: &mut RecordValues) {
+        evaluate_each_vpl(self, site, region, faint_share, out);
     }
 }
 
@@ -52,20 +53,47 @@ pub struct Region {
     pub normal_cone: f32,
 }
 
-/// [`VplSet::evaluate_record`] one VPL and one visibility ray at a time: the default, and
-/// the reference that packet implementations are tested against (same values, bit for bit).
+/// [`VplSet::evaluate_record`] one VPL and one visibility ray at a time (the unoccluded
+/// contributions first: the faint cut needs their total): the default, and the reference
+/// that packet implementations are tested against (same values, bit for bit).
 pub fn evaluate_each_vpl<S: VplSet + ?Sized>(
     set: &S,
     site: &CachePoint,
     region: &Region,
+    faint_share: f32,
     out: &mut RecordValues,
 ) {
-    out.clear(set.vpl_count());
-    for j in 0..set.vpl_count() {
-        let unoccluded = set.unoccluded(j, site);
-        let visible = luminance(unoccluded) > 0.0 && set.visible(j, site);
+    let n = set.vpl_count();
+    out.clear(n);
+    let unoccluded: Vec<Rgb> = (0..n).map(|j| set.unoccluded(j, site)).collect();
+    let luminances: Vec<f32> = unoccluded.iter().map(|&c| luminance(c).max(0.0)).collect();
+    let faint = FaintCut::new(&luminances, faint_share);
+    for (j, &unoccluded) in unoccluded.iter().enumerate() {
+        let visible = luminance(unoccluded) > 0.0
+            && if faint.is_faint(luminances[j]) {
+                out.rays.faint += 1;
+                true
+            } else {
+                out.rays.traced += 1;
+                set.visible(j, site)
+            };
         let full = if visible { unoccluded } else { Rgb::ZERO };
         out.set(j, full, unoccluded, set.bounded(j, site, region));
+    }
+}
+
+/// A record's visibility decisions: rays traced, and faint VPLs taken as visible
+/// without one (summed over records by [`super::ImportanceCache::visibility_rays`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VisibilityRays {
+    pub traced: u64,
+    pub faint: u64,
+}
+
+impl std::ops::Add for VisibilityRays {
+    type Output = VisibilityRays;
+    fn add(self, o: VisibilityRays) -> VisibilityRays {
+        VisibilityRays { traced: self.traced + o.traced, faint: self.faint + o.faint }
     }
 }
 
@@ -81,6 +109,8 @@ pub struct RecordValues {
     pub bounded: Vec<f32>,
     /// RGB sums over the VPLs of E¹, E², E³ (their colours colour the control variates).
     pub totals: [Rgb; 3],
+    /// The record's visibility rays, and the faint VPLs that went without one.
+    pub rays: VisibilityRays,
     /// Scratch of packet implementations, kept to reuse its memory: per VPL the RGB
     /// unoccluded and bounded contributions (a column per channel), and the visibility
     /// found by the packets.
@@ -96,6 +126,7 @@ impl RecordValues {
             v.resize(n, 0.0);
         }
         self.totals = [Rgb::ZERO; 3];
+        self.rays = VisibilityRays::default();
     }
 
     /// `n` entries per list without zeroing those already there, and zero totals: for
@@ -106,6 +137,7 @@ impl RecordValues {
             v.resize(n, 0.0);
         }
         self.totals = [Rgb::ZERO; 3];
+        self.rays = VisibilityRays::default();
     }
 
     /// Stores VPL `j`'s three contributions (RGB; the distributions keep luminance).

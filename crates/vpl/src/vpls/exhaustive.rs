@@ -10,7 +10,8 @@ use super::gbuffer::RecordReceivers;
 use super::soa::{evaluate_groups, DiffuseSite, PairLanes, VplGroup, VplLanes};
 use super::{Vpl, VplKind, Vpls};
 use crate::cache::{
-    relaxed_geometry_term_fast, CachePoint, RecordValues, Region, RelaxedReceiver, RgbColumns, VplSet,
+    relaxed_geometry_term_fast, CachePoint, FaintCut, RecordValues, Region, RelaxedReceiver, RgbColumns,
+    VisibilityRays, VplSet,
 };
 use filtrace_accel::{fan_class, SceneAccel, SegmentFan, FAN_CLASSES, LANES};
 use filtrace_core::cpu::{isa, Isa};
@@ -150,6 +151,7 @@ impl<'a> SceneVpls<'a> {
         &self,
         site: &CachePoint,
         region: &Region,
+        faint_share: f32,
         out: &mut RecordValues,
         isa: Isa,
     ) {
@@ -170,15 +172,14 @@ impl<'a> SceneVpls<'a> {
             rgb: &mut rgb,
             unoccluded: &mut out.unoccluded,
             bounded: &mut out.bounded,
-            visible: &mut visible,
-            packets: ShadowPackets::new(self.ctx.accel, rx),
+            packets: ShadowPackets::new(self.ctx.accel, rx, n),
         };
         match DiffuseSite::new(rx, &relaxed, self.vpls.bound) {
             Some(diffuse) => {
                 evaluate_groups(&self.lanes, &diffuse, isa, |g, p| {
                     if g.dense && p.valid == u8::MAX {
                         pass.store_group(g.index[0] as usize, p);
-                        pass.push_rays(g, p);
+                        pass.queue_rays(g, p);
                     } else {
                         self.store_lanes(g, p, rx, region, &relaxed, &mut pass);
                     }
@@ -189,7 +190,9 @@ impl<'a> SceneVpls<'a> {
             }
             None => (0..n).for_each(|j| self.evaluate_pair(j, rx, region, &relaxed, &mut pass)),
         }
-        pass.packets.flush(pass.visible);
+        let mut packets = pass.packets;
+        let faint = FaintCut::new(&out.unoccluded, faint_share);
+        out.rays = packets.trace_queued(&faint, &out.unoccluded, &mut visible);
         // The totals in VPL order, as the reference sums them.
         let ([cr, cg, cb], [br, bg, bb]) = (&rgb.c, &rgb.b);
         let columns = cr.iter().zip(&cg[..n]).zip(&cb[..n]).zip(&br[..n]).zip(&bg[..n]).zip(&bb[..n]);
@@ -224,8 +227,8 @@ impl<'a> SceneVpls<'a> {
                 continue;
             }
             if p.ray >> i & 1 != 0 {
-                let side = (p.back >> i & 1) as usize;
-                pass.packets.push_lane(j, side, p.class[i] as usize, p.w(i), p.t_max[i], pass.visible);
+                let side = p.back >> i & 1;
+                pass.packets.queue_lane(j, side, p.class[i] as u8, p.w(i), p.t_max[i]);
             }
             pass.store(j, p.c(i), p.b(i), p.lum_c[i], p.lum_b[i]);
         }
@@ -244,7 +247,7 @@ impl<'a> SceneVpls<'a> {
         let v = &self.vpls.vpls[j];
         let (c, w, dist, parts) = contribution_parts(v, rx, self.vpls.bound);
         if luminance(c) > 0.0 && dist > 0.0 {
-            pass.packets.push(j, &rx.shadow_ray(w, dist), pass.visible);
+            pass.packets.queue(j, &rx.shadow_ray(w, dist));
         }
         let bounded = match parts {
             Some(parts) => bounded_towards(v, rx, w, dist, &parts, relaxed),
@@ -313,38 +316,84 @@ fn bounded_towards(
 /// side and [`fan_class`] (octant and dominant axis of the direction, the classes the
 /// packet kernels take as one) into fans of eight, each traced with
 /// [`SceneAccel::occluded_fan`] once full, whose answer per lane is that of the
-/// single-ray query.
+/// single-ray query. The rays are queued while the record's VPLs are evaluated and
+/// traced afterwards, when the [`FaintCut`] (which needs every contribution) is known.
 struct ShadowPackets<'a> {
     accel: &'a SceneAccel,
     /// The record's two ray origins (`offset_origin` towards and away from `n_g`).
     origins: [Vec3; 2],
     /// Per side and class: the fan, the VPLs of its lanes and how many lanes are set.
     fans: [[(SegmentFan, [u32; LANES], usize); FAN_CLASSES]; 2],
+    /// Rays from one of the origins, in the order they were queued.
+    queued: Vec<QueuedLane>,
+    /// Rays from neither origin (not shadow rays of the record), traced alone.
+    alone: Vec<(u32, Ray)>,
+}
+
+/// The shadow ray of VPL `vpl` from `origins[side]` along `dir` to `t_max`, `class`
+/// its [`fan_class`].
+#[derive(Clone, Copy)]
+pub(crate) struct QueuedLane {
+    vpl: u32,
+    side: u8,
+    class: u8,
+    dir: Vec3,
+    t_max: f32,
 }
 
 impl<'a> ShadowPackets<'a> {
-    fn new(accel: &'a SceneAccel, rx: &Receiver) -> Self {
+    /// The packets of a record at `rx` with room for `vpl_count` queued rays.
+    fn new(accel: &'a SceneAccel, rx: &Receiver, vpl_count: usize) -> Self {
         let n_g = rx.si.n_g;
         let origins = [rx.si.offset_origin(n_g), rx.si.offset_origin(-n_g)];
         let fans = origins.map(|o| [(SegmentFan::new(o, 0.0), [0; LANES], 0); FAN_CLASSES]);
-        ShadowPackets { accel, origins, fans }
+        ShadowPackets { accel, origins, fans, queued: Vec::with_capacity(vpl_count), alone: Vec::new() }
     }
 
-    /// Queues the ray deciding VPL `j`'s visibility; full fans are traced at once. A ray
-    /// from neither origin (not a shadow ray of the record) is traced alone.
+    /// Queues the ray deciding VPL `j`'s visibility.
     #[inline]
-    fn push(&mut self, j: usize, ray: &Ray, visible: &mut [bool]) {
+    fn queue(&mut self, j: usize, ray: &Ray) {
         let side = (ray.origin != self.origins[0]) as usize;
         if ray.origin != self.origins[side] || ray.t_min != 0.0 {
-            visible[j] = !self.accel.occluded(ray);
+            self.alone.push((j as u32, *ray));
             return;
         }
-        self.push_lane(j, side, fan_class(ray.dir), ray.dir, ray.t_max, visible);
+        self.queue_lane(j, side as u8, fan_class(ray.dir) as u8, ray.dir, ray.t_max);
     }
 
     /// Queues the shadow ray of VPL `j` from `origins[side]` along `dir` to `t_max` (the
     /// ray [`Receiver::shadow_ray`] makes, given by its parts; `class` is
     /// [`fan_class`]`(dir)`).
+    #[inline]
+    fn queue_lane(&mut self, j: usize, side: u8, class: u8, dir: Vec3, t_max: f32) {
+        self.queued.push(QueuedLane { vpl: j as u32, side, class, dir, t_max });
+    }
+
+    /// Decides every queued VPL's visibility: faint ones (by their unoccluded luminance)
+    /// are visible without a ray, the others are traced in fans.
+    fn trace_queued(&mut self, faint: &FaintCut, unoccluded: &[f32], visible: &mut [bool]) -> VisibilityRays {
+        let queued = self.queued.len() + self.alone.len();
+        let mut faint_vpls = 0;
+        for q in std::mem::take(&mut self.queued) {
+            let j = q.vpl as usize;
+            if faint.is_faint(unoccluded[j]) {
+                visible[j] = true;
+                faint_vpls += 1;
+            } else {
+                self.push_lane(j, q.side as usize, q.class as usize, q.dir, q.t_max, visible);
+            }
+        }
+        for (j, ray) in std::mem::take(&mut self.alone) {
+            let j = j as usize;
+            let is_faint = faint.is_faint(unoccluded[j]);
+            faint_vpls += is_faint as usize;
+            visible[j] = is_faint || !self.accel.occluded(&ray);
+        }
+        self.flush(visible);
+        VisibilityRays { traced: (queued - faint_vpls) as u64, faint: faint_vpls as u64 }
+    }
+
+    /// Adds a ray to its fan; a full fan is traced at once.
     #[inline]
     fn push_lane(
         &mut self,
@@ -420,18 +469,17 @@ impl VplSet for SceneVpls<'_> {
     /// the record's point (`ShadowPackets`; VPLs that cannot light the record, e.g.
     /// behind its surface, get no ray). The RGB totals are summed in VPL order
     /// afterwards, as the reference does.
-    fn evaluate_record(&self, site: &CachePoint, region: &Region, out: &mut RecordValues) {
-        self.evaluate_record_with(site, region, out, isa());
+    fn evaluate_record(&self, site: &CachePoint, region: &Region, faint_share: f32, out: &mut RecordValues) {
+        self.evaluate_record_with(site, region, faint_share, out, isa());
     }
 }
 
 /// One record's evaluation in progress: per VPL the RGB unoccluded and bounded
-/// contributions and their luminances, and the visibility the fans find.
+/// contributions and their luminances, and the queued visibility rays.
 struct RecordPass<'s, 'a> {
     rgb: &'s mut RgbColumns,
     unoccluded: &'s mut [f32],
     bounded: &'s mut [f32],
-    visible: &'s mut [bool],
     packets: ShadowPackets<'a>,
 }
 
@@ -461,16 +509,15 @@ impl RecordPass<'_, '_> {
         }
     }
 
-    /// The shadow rays of a group's lanes, in lane order.
+    /// Queues the shadow rays of a group's lanes, in lane order.
     #[inline]
-    fn push_rays(&mut self, g: &VplGroup, p: &PairLanes) {
+    fn queue_rays(&mut self, g: &VplGroup, p: &PairLanes) {
         let mut rays = p.ray;
         while rays != 0 {
             let i = rays.trailing_zeros() as usize;
             rays &= rays - 1;
-            let side = (p.back >> i & 1) as usize;
-            let (j, class) = (g.index[i] as usize, p.class[i] as usize);
-            self.packets.push_lane(j, side, class, p.w(i), p.t_max[i], self.visible);
+            let side = p.back >> i & 1;
+            self.packets.queue_lane(g.index[i] as usize, side, p.class[i] as u8, p.w(i), p.t_max[i]);
         }
     }
 }
@@ -507,7 +554,8 @@ mod packet_tests {
     /// The packet evaluation of a record gives the per-VPL reference's values bit for
     /// bit (so the same visibility bits: E¹ is E² where visible, 0 where not), on the
     /// Cornell box with its flat bottom level (any packet traced as one) and with an
-    /// 8-wide BVH (packets of mixed directions fall back to one query per lane).
+    /// 8-wide BVH (packets of mixed directions fall back to one query per lane), with
+    /// every ray traced and with the faint VPLs taken as visible.
     #[test]
     fn packet_visibility_equals_one_ray_per_vpl() {
         let scene = filtrace_scene::builtin("cornell").expect("built-in Cornell box");
@@ -524,33 +572,38 @@ mod packet_tests {
         for accel in [r.context().accel, &bvh] {
             let receivers = RecordReceivers::from_pixels(&receivers);
             let set = SceneVpls::new(PathContext { accel, ..r.context() }, &vpls, &receivers);
-            let (mut packet, mut reference) = (RecordValues::default(), RecordValues::default());
-            let (mut visible, mut occluded) = (0, 0);
-            for site in &sites {
-                let region = Region { radius: 0.1, normal_cone: 0.2 };
-                set.evaluate_record_with(site, &region, &mut packet, filtrace_core::cpu::Isa::Base);
-                let mut widest = RecordValues::default();
-                set.evaluate_record(site, &region, &mut widest);
-                assert_eq!(widest.full, packet.full, "widest lane code vs portable at pixel {}", site.pixel);
-                evaluate_each_vpl(&set, site, &region, &mut reference);
-                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&packet.full), bits(&reference.full), "E1 at pixel {}", site.pixel);
-                assert_eq!(
-                    bits(&packet.unoccluded),
-                    bits(&reference.unoccluded),
-                    "E2 at pixel {}",
-                    site.pixel
-                );
-                assert_eq!(bits(&packet.bounded), bits(&reference.bounded), "E3 at pixel {}", site.pixel);
-                assert_eq!(packet.totals, reference.totals, "totals at pixel {}", site.pixel);
-                for (f, u) in packet.full.iter().zip(&packet.unoccluded) {
-                    visible += (*u > 0.0 && f == u) as usize;
-                    occluded += (*u > 0.0 && *f == 0.0) as usize;
+            let mut occluded_by_share = Vec::new();
+            for faint_share in [0.0, 0.05] {
+                let (mut packet, mut reference) = (RecordValues::default(), RecordValues::default());
+                let (mut visible, mut occluded) = (0, 0);
+                for site in &sites {
+                    let region = Region { radius: 0.1, normal_cone: 0.2 };
+                    let base = filtrace_core::cpu::Isa::Base;
+                    set.evaluate_record_with(site, &region, faint_share, &mut packet, base);
+                    let mut widest = RecordValues::default();
+                    set.evaluate_record(site, &region, faint_share, &mut widest);
+                    let what = format!("pixel {}, faint share {faint_share}", site.pixel);
+                    assert_eq!(widest.full, packet.full, "widest lane code vs portable at {what}");
+                    evaluate_each_vpl(&set, site, &region, faint_share, &mut reference);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&packet.full), bits(&reference.full), "E1 at {what}");
+                    assert_eq!(bits(&packet.unoccluded), bits(&reference.unoccluded), "E2 at {what}");
+                    assert_eq!(bits(&packet.bounded), bits(&reference.bounded), "E3 at {what}");
+                    assert_eq!(packet.totals, reference.totals, "totals at {what}");
+                    for (f, u) in packet.full.iter().zip(&packet.unoccluded) {
+                        visible += (*u > 0.0 && f == u) as usize;
+                        occluded += (*u > 0.0 && *f == 0.0) as usize;
+                    }
                 }
+                assert!(
+                    visible > 1000 && occluded > 100,
+                    "{visible} visible, {occluded} occluded: the test has power"
+                );
+                occluded_by_share.push(occluded);
             }
             assert!(
-                visible > 1000 && occluded > 100,
-                "{visible} visible, {occluded} occluded: the test has power"
+                occluded_by_share[1] < occluded_by_share[0],
+                "the faint share takes some occluded VPLs as visible: {occluded_by_share:?}"
             );
         }
     }

@@ -26,7 +26,7 @@ use super::gbuffer::{CameraSurfaces, RecordReceivers};
 use super::{generate_vpls, VplParams, Vpls};
 use crate::cache::{
     place_on_surfaces, CacheParams, ImportanceCache, OptimizeStats, SampleFeedback, SampleHistory,
-    SamplerKind,
+    SamplerKind, VisibilityRays,
 };
 use filtrace_accel::{HitPacket, RayPacket, LANES};
 use filtrace_core::sampler::Sampler;
@@ -118,6 +118,8 @@ pub struct VplReport {
     pub vpls: usize,
     pub light_paths: usize,
     pub cache_records: usize,
+    /// The cache's visibility rays, and the faint VPLs its records took as visible.
+    pub cache_rays: VisibilityRays,
     /// VPL generation and cache stages of `prepare`, optimisation of the passes so far
     /// (shading is the passes' time, measured by whoever runs them).
     pub times: StageTimes,
@@ -169,6 +171,7 @@ impl VplIntegrator {
             vpls: self.frame.vpls.len(),
             light_paths: self.frame.vpls.light_paths,
             cache_records: cache.as_ref().map_or(0, |c| c.records().len()),
+            cache_rays: cache.as_ref().map(|c| c.visibility_rays()).unwrap_or_default(),
             times,
             optimised_passes: learning.passes,
             last_step: learning.last,

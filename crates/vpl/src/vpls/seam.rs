@@ -21,10 +21,13 @@
 //! finished frame. [`frame_memory`] estimates the integrator's own buffers before anything is allocated.
 
 use super::eval::Receiver;
+use super::exhaustive::QueuedLane;
 use super::integrator::{StageTimes, VplIntegrator, VplSettings};
 use super::state::VplState;
 use super::{Vpl, Vpls};
-use crate::cache::{CacheRecord, RecordParams, SampleFeedback, SamplerKind, StoredSample, CDF_BLOCK};
+use crate::cache::{
+    CacheRecord, RecordParams, SampleFeedback, SamplerKind, StoredSample, VisibilityRays, CDF_BLOCK,
+};
 use filtrace_core::{Image, Vec3};
 use filtrace_render::film::Film;
 use filtrace_render::memory::{bytes_of, image_bytes, MemoryEstimate};
@@ -41,6 +44,8 @@ pub struct VplFrame {
     pub cache_distance: Image,
     pub vpls: Vpls,
     pub cache_records: usize,
+    /// The cache's visibility rays, and the faint VPLs its records took as visible.
+    pub cache_rays: VisibilityRays,
     /// Shading is the passes' wall time less the optimisation between them.
     pub times: StageTimes,
     /// `cancel` stopped the passes (every pixel has at least one sample).
@@ -106,6 +111,7 @@ pub fn collect_frame(film: Film, integrator: &VplIntegrator, passes_ms: f64, can
         cache_distance: integrator.cache_distance(),
         vpls: integrator.vpls().clone(),
         cache_records: report.cache_records,
+        cache_rays: report.cache_rays,
         times,
         cancelled,
     }
@@ -158,8 +164,9 @@ pub fn frame_memory(
         + bytes_of::<Vec3>(2)
         + 16;
     // `RecordValues`: three luminances, two RGB contributions and a visibility per VPL;
-    // the CDFs' running sums (`f64`) while a record's distributions are built.
-    let scratch = threads as u64 * vpls * (3 * 4 + 2 * 12 + 1 + 8);
+    // the CDFs' running sums (`f64`) while a record's distributions are built; the
+    // record's queued visibility rays.
+    let scratch = threads as u64 * vpls * (3 * 4 + 2 * 12 + 1 + 8 + size_of::<QueuedLane>() as u64);
     let learns = cached && settings.sampler == SamplerKind::Optimized;
     let history = records * settings.cache.optimizer.history as u64;
     let feedback = pixels * max_pass as u64;

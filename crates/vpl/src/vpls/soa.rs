@@ -386,7 +386,8 @@ mod tests {
     /// the per-VPL reference's values bit for bit: E¹, E², E³ and the RGB totals, on
     /// diffuse and glossy receivers, with and without the geometry bound, radii and
     /// normal cones from 0 to beyond the scene, VPLs exactly at a record's point
-    /// (degenerate distance, evaluated per VPL), surface VPLs lit from below.
+    /// (degenerate distance, evaluated per VPL), surface VPLs lit from below, faint shares
+    /// from 0 (every ray traced) to 0.3.
     #[test]
     fn vector_evaluation_equals_the_per_vpl_reference() {
         let r = mixed_cornell();
@@ -440,10 +441,12 @@ mod tests {
             for isa in Isa::supported() {
                 for (k, site) in sites.iter().enumerate() {
                     let region = regions[k % regions.len()];
-                    set.evaluate_record_with(site, &region, &mut fast, isa);
-                    evaluate_each_vpl(&set, site, &region, &mut reference);
+                    let faint_share = [0.0, 0.02, 0.3][k % 3];
+                    set.evaluate_record_with(site, &region, faint_share, &mut fast, isa);
+                    evaluate_each_vpl(&set, site, &region, faint_share, &mut reference);
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    let what = format!("{isa:?}, {bound:?}, pixel {}, {region:?}", site.pixel);
+                    let what =
+                        format!("{isa:?}, {bound:?}, pixel {}, {region:?}, faint {faint_share}", site.pixel);
                     assert_eq!(bits(&fast.full), bits(&reference.full), "E1: {what}");
                     assert_eq!(bits(&fast.unoccluded), bits(&reference.unoccluded), "E2: {what}");
                     assert_eq!(bits(&fast.bounded), bits(&reference.bounded), "E3: {what}");

@@ -43,23 +43,34 @@ fn each_distribution_samples_its_pmf() {
     }
 }
 
-/// The three non-uniform tables are the toy scene's values: E¹ = E² · V and E³ ≥ E²
-/// (the relaxed geometry term bounds the exact one at the record itself, for VPLs
-/// farther than twice the radius: closer ones meet the bound's clamp).
+/// The three non-uniform tables are the toy scene's values: E¹ = E² · V (E² for the
+/// faint VPLs, taken as visible) and E³ ≥ E² (the relaxed geometry term bounds the exact
+/// one at the record itself, for VPLs farther than twice the radius: closer ones meet the
+/// bound's clamp); with and without a faint share.
 #[test]
 fn distributions_hold_the_scene_values() {
     let scene = ToyScene::new(VPLS, 22);
-    let cache = toy_cache(&scene, 6, &CacheParams::default());
+    for faint_share in [0.0, 0.02, 0.2] {
+        check_scene_values(&scene, faint_share);
+    }
+}
+
+fn check_scene_values(scene: &ToyScene, faint_share: f32) {
+    let cache = toy_cache(scene, 6, &CacheParams { faint_share, ..CacheParams::default() });
     for r in cache.records() {
         let (x, n) = (r.point.position, r.point.normal);
         let full = r.distribution(Technique::Full).unwrap();
         let unocc = r.distribution(Technique::Unoccluded).unwrap();
         let bounded = r.distribution(Technique::Bounded).unwrap();
+        let lums: Vec<f32> =
+            (0..VPLS).map(|j| filtrace_core::luminance(scene.unoccluded_at(j, x, n))).collect();
+        let cut = FaintCut::new(&lums, faint_share);
         for j in 0..VPLS {
             let e2 = filtrace_core::luminance(scene.unoccluded_at(j, x, n));
-            let e1 = filtrace_core::luminance(scene.contribution(j, x, n));
+            let visible = cut.is_faint(e2) || scene.visible_at(j, x);
+            let e1 = if visible { e2 } else { 0.0 };
             let share = |d: &VplCdf, v: f32| d.pmf(j) * d.total() - v;
-            assert!(share(full, e1).abs() <= 1e-4 * full.total(), "E1 of VPL {j}");
+            assert!(share(full, e1).abs() <= 1e-4 * full.total(), "E1 of VPL {j}, faint share {faint_share}");
             assert!(share(unocc, e2).abs() <= 1e-4 * unocc.total(), "E2 of VPL {j}");
             if (scene.vpls[j].position - x).length() > 2.0 * r.radius {
                 assert!(

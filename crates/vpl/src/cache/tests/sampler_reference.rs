@@ -46,7 +46,7 @@ fn with_short_records(mut cache: ImportanceCache, scene: &ToyScene, n: usize) ->
     for (i, r) in cache.records.iter_mut().enumerate().filter(|(i, _)| i % 3 == 0) {
         let region = Region { radius: r.radius, normal_cone: r.normal_cone };
         let mut values = RecordValues::default();
-        scene.evaluate_record(&r.point, &region, &mut values);
+        scene.evaluate_record(&r.point, &region, cache.config.faint_share, &mut values);
         for list in [&mut values.full, &mut values.unoccluded, &mut values.bounded] {
             list.truncate(n);
         }

@@ -7,8 +7,8 @@ use super::{mean_and_error, surface_points, toy_cache, ToyScene};
 use filtrace_core::rng::SplitMix64;
 use filtrace_core::Rgb;
 
-/// |mean − exact| may reach this many standard errors: 5 samplers × 3 settings × 6
-/// points × 3 channels = 270 tests, Šidák at 1 % gives 4.2σ; 4.5σ leaves room for the
+/// |mean − exact| may reach this many standard errors: 5 samplers × 4 settings × 6
+/// points × 3 channels = 360 tests, Šidák at 1 % gives 4.3σ; 4.5σ leaves room for the
 /// heavy tails of 1/q weights.
 const Z_MAX: f64 = 4.5;
 
@@ -56,6 +56,20 @@ fn optimise(scene: &ToyScene, cache: &mut ImportanceCache, frames: usize) {
     }
 }
 
+/// Faint VPLs that are in fact occluded, over the cache's records: those whose E¹ the
+/// faint share makes wrong.
+fn occluded_faint_vpls(scene: &ToyScene, cache: &ImportanceCache, share: f32) -> usize {
+    let mut wrong = 0;
+    for r in cache.records() {
+        let (x, n) = (r.point.position, r.point.normal);
+        let lums: Vec<f32> =
+            (0..scene.vpls.len()).map(|j| filtrace_core::luminance(scene.unoccluded_at(j, x, n))).collect();
+        let cut = FaintCut::new(&lums, share);
+        wrong += (0..lums.len()).filter(|&j| cut.is_faint(lums[j]) && !scene.visible_at(j, x)).count();
+    }
+    wrong
+}
+
 #[test]
 fn every_sampler_is_unbiased() {
     let scene = ToyScene::new(64, 3);
@@ -63,9 +77,15 @@ fn every_sampler_is_unbiased() {
         CacheParams::default(),
         CacheParams { neighbours: 1, distributions: DistributionSet::thesis(), ..CacheParams::default() },
         CacheParams { neighbours: 3, distributions: DistributionSet::first(1), ..CacheParams::default() },
+        // A tenth of each record's light from VPLs taken as visible without a ray.
+        CacheParams { faint_share: 0.1, ..CacheParams::default() },
     ];
     for (s, config) in settings.iter().enumerate() {
         let mut cache = toy_cache(&scene, 24, config);
+        if config.faint_share >= 0.1 {
+            let wrong = occluded_faint_vpls(&scene, &cache, config.faint_share);
+            assert!(wrong > 10, "setting {s}: {wrong} occluded VPLs taken as visible, the test has power");
+        }
         optimise(&scene, &mut cache, 3);
         assert!(cache.params().iter().any(|p| *p != RecordParams::prior(config)), "the optimiser moved");
         for kind in SamplerKind::ALL {

@@ -110,6 +110,22 @@ pub fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// A spinner with the elapsed time for a stage that has no count to show (a frame's VPLs
+/// and importance cache), on stderr when it is a terminal, hidden otherwise; it ticks on
+/// its own thread while the stage runs.
+pub fn spinner(what: &str) -> indicatif::ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let spinner = indicatif::ProgressBar::new_spinner();
+    let style = indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}]")
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner());
+    spinner.set_style(style);
+    spinner.set_message(what.to_string());
+    spinner.enable_steady_tick(std::time::Duration::from_millis(100));
+    spinner
+}
+
 /// Bars for several things at once (frames and the samples of the current frame) on stderr
 /// when it is a terminal, hidden otherwise.
 pub fn multi_progress() -> indicatif::MultiProgress {

@@ -15,7 +15,7 @@
 use super::render_args::CommonArgs;
 use super::render_output::{render_attributes, write_outputs, Written};
 use super::render_plain::render_passes;
-use super::render_session::{progress_bar, test_hook, CtrlC, Interrupted};
+use super::render_session::{progress_bar, spinner, test_hook, CtrlC, Interrupted};
 use anyhow::Context;
 use filtrace_core::Image;
 use filtrace_render::Renderer;
@@ -130,6 +130,16 @@ impl VplArgs {
         s.vpls.validate().map_err(|e| anyhow::anyhow!("--vpls/--vpl-clamp: {e}"))?;
         s.cache.validate().map_err(|e| anyhow::anyhow!("--cache-points/--cache-neighbours: {e}"))?;
         Ok(s)
+    }
+
+    /// What the spinner says while a frame's VPLs and importance cache are built.
+    fn preparing_message(&self) -> String {
+        let cached = !self.ground_truth && self.vpl_sampler.needs_cache();
+        if cached {
+            format!("building {} VPLs and an importance cache of {} records", self.vpls, self.cache_points)
+        } else {
+            format!("building {} VPLs", self.vpls)
+        }
     }
 
     /// Whether the integrator carries state from frame to frame (`optimized`): a frame of
@@ -366,7 +376,9 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     let mut run = VplRun { c, settings: vs, pool: &pool, cancel: ctrlc.flag(), carried: None };
     // The integrator's `prepare`: VPLs, G-buffer and importance cache of the frame.
     let frame = renderer.frame().index;
+    let preparing = spinner(&v.preparing_message());
     run.prepare(&mut renderer, frame)?;
+    preparing.finish_and_clear();
     test_hook("built", ctrlc.flag());
     ctrlc.arm();
     test_hook("rendering", ctrlc.flag());

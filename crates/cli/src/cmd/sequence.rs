@@ -236,7 +236,12 @@ impl Engine<'_> {
                 })
             }
             Engine::Vpl(run, renderer) => {
+                // The bar counts samples; until they start it says what the frame is doing.
+                let label = bar.message();
+                bar.set_message(format!("{label}: building the VPLs and the importance cache"));
+                bar.tick();
                 run.prepare(renderer, stamp.frame as i64)?;
+                bar.set_message(label);
                 let summary = run.render_frame(renderer, out, &attributes, bar)?;
                 let finished = summary.as_ref().is_some_and(|s| !s.cancelled);
                 if let Some(state) = finished.then(|| run.state(renderer)).flatten() {

@@ -66,6 +66,7 @@ fn bad_vpl_options_name_the_option() {
         (vec!["--vpl-clamp", "-1"], "--vpl-clamp -1.0"),
         (vec!["--cache-faint-share", "1"], "cache faint share 1"),
         (vec!["--cache-faint-share", "nan"], "not a finite number"),
+        (vec!["--cache-faint-share", "-0.1"], "cache faint share -0.1"),
     ] {
         let o = run(bin()
             .args(["render", "cornell", "--integrator", "vpl", "--res", "8x8", "--spp", "1"])

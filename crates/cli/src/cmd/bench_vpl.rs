@@ -22,7 +22,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=MAX_COUNT))]
     pub cache_points: u32,
     /// See `render --cache-faint-share`.
-    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, value_parser = super::render_vpl::parse_faint_share)]
+    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, allow_negative_numbers = true, value_parser = super::render_vpl::parse_faint_share)]
     pub cache_faint_share: f32,
     /// Frames per sampler; each stage reports its median over them (the first frame
     /// also pays for cold caches and page faults).

@@ -66,7 +66,7 @@ pub struct VplArgs {
     /// The faintest VPLs of a cache record, carrying together at most this share of its
     /// unoccluded light, count as visible without a shadow ray (0: every ray traced, as
     /// the thesis). Shapes only a sampling distribution: no bias.
-    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, value_parser = parse_faint_share)]
+    #[arg(long, default_value_t = DEFAULT_FAINT_SHARE, allow_negative_numbers = true, value_parser = parse_faint_share)]
     pub cache_faint_share: f32,
     /// Every VPL with exact visibility at every sample (the ground truth).
     #[arg(long)]

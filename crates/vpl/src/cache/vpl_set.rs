@@ -69,7 +69,7 @@ pub fn evaluate_each_vpl<S: VplSet + ?Sized>(
     let luminances: Vec<f32> = unoccluded.iter().map(|&c| luminance(c).max(0.0)).collect();
     let faint = FaintCut::new(&luminances, faint_share);
     for (j, &unoccluded) in unoccluded.iter().enumerate() {
-        let visible = luminance(unoccluded) > 0.0
+        let visible = luminances[j] > 0.0
             && if faint.is_faint(luminances[j]) {
                 out.rays.faint += 1;
                 true

@@ -65,8 +65,7 @@ fn check_scene_values(scene: &ToyScene, faint_share: f32) {
         let lums: Vec<f32> =
             (0..VPLS).map(|j| filtrace_core::luminance(scene.unoccluded_at(j, x, n))).collect();
         let cut = FaintCut::new(&lums, faint_share);
-        for j in 0..VPLS {
-            let e2 = filtrace_core::luminance(scene.unoccluded_at(j, x, n));
+        for (j, &e2) in lums.iter().enumerate() {
             let visible = cut.is_faint(e2) || scene.visible_at(j, x);
             let e1 = if visible { e2 } else { 0.0 };
             let share = |d: &VplCdf, v: f32| d.pmf(j) * d.total() - v;

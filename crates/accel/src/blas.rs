@@ -14,7 +14,7 @@ use crate::triangle::WatertightRay;
 use crate::wide::{self, RayBoxes, WideNode};
 #[cfg(target_arch = "x86_64")]
 use crate::{avx2, avx2_packet};
-use crate::{closer, sah, spatial, BuildParams, Simd};
+use crate::{closer, collapse, refit, sah, spatial, BuildParams, Simd};
 use filtrace_core::{Aabb, Vec3};
 use filtrace_scene::Mesh;
 use std::collections::HashMap;
@@ -202,9 +202,9 @@ impl Blas {
     /// Expected node visits plus packet tests of a random ray through the root box.
     pub(crate) fn sah_cost(&self) -> f64 {
         match self {
-            Blas::Bvh4(b) => sah_cost_of(&b.nodes),
-            Blas::Bvh8(b) => sah_cost_of(&b.nodes),
-            Blas::QBvh8(b) => sah_cost_of(&b.decoded()),
+            Blas::Bvh4(b) => refit::sah_cost(&b.nodes),
+            Blas::Bvh8(b) => refit::sah_cost(&b.nodes),
+            Blas::QBvh8(b) => refit::sah_cost(&b.decoded()),
             _ => 0.0,
         }
     }
@@ -332,24 +332,6 @@ fn split_coverage<const W: usize>(
     Ok(())
 }
 
-fn sah_cost_of<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
-    let Some(root) = nodes.first() else { return 0.0 };
-    let area = |n: &WideNode<W>, i: usize| n.child_box(i).surface_area() as f64;
-    let root_area: f64 =
-        (0..W).map(|i| root.child_box(i)).fold(Aabb::EMPTY, Aabb::union).surface_area() as f64;
-    let mut cost = 1.0;
-    for n in nodes {
-        for i in 0..W {
-            if n.child_box(i).is_empty() {
-                continue;
-            }
-            let w = area(n, i) / root_area.max(f64::MIN_POSITIVE);
-            cost += w * if n.count[i] == 0 { 1.0 } else { n.count[i] as f64 };
-        }
-    }
-    cost
-}
-
 impl<const W: usize> WideBvh<W> {
     /// The binned SAH tree over `boxes` (references to triangles `ids`, `tri(id)` the
     /// corners; `tri_count` distinct ones) collapsed to `W`-wide nodes; `None` when the
@@ -364,13 +346,14 @@ impl<const W: usize> WideBvh<W> {
         tri: impl Fn(usize) -> [Vec3; 3],
         params: &BuildParams,
     ) -> Option<Self> {
-        let plain = Self::from_tree(sah::build_binary(boxes, params), ids, tri_count, &tri)?;
+        let plain = Self::from_tree(sah::build_binary(boxes, params), ids, tri_count, &tri, params)?;
         if params.spatial_split_budget <= 0.0 || boxes.len() > params.max_spatial_split_references {
             return Some(plain);
         }
         let corners: Vec<[Vec3; 3]> = ids.iter().map(|&i| tri(i as usize)).collect();
-        let split = Self::from_tree(spatial::build_spatial(boxes, &corners, params), ids, tri_count, &tri)?;
-        Some(if sah_cost_of(&split.nodes) < sah_cost_of(&plain.nodes) { split } else { plain })
+        let split =
+            Self::from_tree(spatial::build_spatial(boxes, &corners, params), ids, tri_count, &tri, params)?;
+        Some(if refit::sah_cost(&split.nodes) < refit::sah_cost(&plain.nodes) { split } else { plain })
     }
 
     /// The binary tree `root` over references `order` (indices into `ids`) collapsed.
@@ -379,6 +362,7 @@ impl<const W: usize> WideBvh<W> {
         ids: &[u32],
         tri_count: usize,
         tri: &impl Fn(usize) -> [Vec3; 3],
+        params: &BuildParams,
     ) -> Option<Self> {
         let root = root?;
         let mut tris = TriPackets { tri_count, bounds: root.bounds(), ..TriPackets::default() };
@@ -395,7 +379,7 @@ impl<const W: usize> WideBvh<W> {
             }
             (start, tris.packets.len() as u32 - start)
         };
-        let mut nodes = wide::collapse(&root, &mut leaf);
+        let mut nodes = collapse::collapse_sah(&root, params, &mut leaf);
         let odds = child_order::order_for_any_hit(&mut nodes, |b, first, count| {
             leaf_odds(&tris, b, first, count, W / 4)
         });

@@ -78,7 +78,7 @@ impl Odds {
     }
 }
 
-/// Puts the used slots of every node of `nodes` (a tree made by `wide::collapse`:
+/// Puts the used slots of every node of `nodes` (a tree made by `collapse::collapse_sah`:
 /// children after their parents) in increasing [`Odds::priority`], empty slots last;
 /// `leaf(box, first, count)` estimates a leaf. Returns the odds of the root relative to
 /// the union of its child boxes (the default for an empty tree).

@@ -96,6 +96,7 @@ pub mod bench;
 mod blas;
 mod brute;
 mod child_order;
+mod collapse;
 mod flat_blas;
 mod merge;
 mod packet;

@@ -77,7 +77,7 @@ impl SceneAccel {
     }
 }
 
-/// Recomputes every child box of `nodes` (a tree made by `wide::collapse`): a leaf slot
+/// Recomputes every child box of `nodes` (a tree made by `collapse::collapse_sah`): a leaf slot
 /// gets `leaf_box(first, count)`, an inner slot the union of its node's child boxes.
 /// `collapse` allocates children after their parent, so one reverse sweep sees every
 /// child before its parent. Boxes are unions (min/max, exact), so a refit tree holds the
@@ -112,9 +112,9 @@ fn set_child_box<const W: usize>(n: &mut WideNode<W>, i: usize, a: &Aabb) {
 }
 
 /// SAH cost of a wide tree relative to its root box: one node visit per inner child and
-/// `count` primitive tests per leaf child, each weighted by the child's area over the
-/// root's (the expected work of a random ray through the root box). Zero for an empty
-/// tree.
+/// one leaf test per `W / 4` packets of a leaf child (the 8-wide kernels test packets in
+/// pairs), each weighted by the child's area over the root's (the expected work of a
+/// random ray through the root box). Zero for an empty tree.
 pub(crate) fn sah_cost<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
     let Some(root) = nodes.first() else { return 0.0 };
     let root_area = node_box(root).surface_area() as f64;
@@ -128,7 +128,7 @@ pub(crate) fn sah_cost<const W: usize>(nodes: &[WideNode<W>]) -> f64 {
             if b.is_empty() {
                 continue;
             }
-            let work = if n.count[i] == 0 { 1.0 } else { n.count[i] as f64 };
+            let work = if n.count[i] == 0 { 1.0 } else { n.count[i].div_ceil(W as u32 / 4) as f64 };
             cost += work * b.surface_area() as f64 / root_area;
         }
     }

@@ -21,8 +21,13 @@ use filtrace_core::{Aabb, Vec3};
 /// Parameters of the binned SAH build, with named presets.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BuildParams {
-    /// Number of bins `K` per axis (Wald 2007 uses 16-32; more bins, better trees).
+    /// Number of bins `K` per axis for object splits (Wald 2007 uses 16-32; more bins,
+    /// better trees).
     pub bins: usize,
+    /// Number of bins per axis for spatial splits ([`BuildParams::spatial_split_budget`]),
+    /// whose binning clips every straddling triangle to the bins it crosses: the larger
+    /// part of a spatial build's time.
+    pub spatial_bins: usize,
     /// Largest leaf; nodes with more primitives are always split.
     pub max_leaf_size: usize,
     /// SAH cost of visiting one node, `C_trav`.
@@ -109,6 +114,7 @@ impl BuildParams {
     pub fn fastest_build() -> Self {
         Self {
             bins: 8,
+            spatial_bins: 8,
             max_leaf_size: 8,
             traversal_cost: 1.0,
             intersection_cost: 1.0,
@@ -122,10 +128,14 @@ impl BuildParams {
         }
     }
 
-    /// The default: 16 bins, as in Wald 2007.
+    /// The default: 32 object bins, 16 spatial bins. 32 object bins over 16 (1 thread,
+    /// incoherent closest hits, `docs/perf-accel.md` "Stop 22"): teapot +3-7 %,
+    /// bunny-room +5 %, grass-1m +5-13 %; the build takes 3-5 % longer. 32 spatial bins
+    /// would double the build of grass and bunny-room for no measured gain.
     pub fn balanced() -> Self {
         Self {
-            bins: 16,
+            bins: 32,
+            spatial_bins: 16,
             max_leaf_size: 8,
             traversal_cost: 1.0,
             intersection_cost: 1.0,
@@ -139,10 +149,12 @@ impl BuildParams {
         }
     }
 
-    /// 32 bins: better trees for static scenes, about twice the binning work.
+    /// 32 bins for spatial splits too, and spatial splits on meshes of any size: better
+    /// trees for static scenes, about twice the build.
     pub fn high_quality() -> Self {
         Self {
             bins: 32,
+            spatial_bins: 32,
             max_leaf_size: 8,
             traversal_cost: 1.0,
             intersection_cost: 1.0,

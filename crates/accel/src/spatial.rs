@@ -67,6 +67,7 @@ pub(crate) fn build_spatial(
         corners,
         params,
         bins: params.bins.clamp(2, 64),
+        spatial_bins: params.spatial_bins.clamp(2, 64),
         min_overlap: MIN_OVERLAP * root.surface_area(),
         growth: Vec3::splat(largest * PIECE_GROWTH),
     };
@@ -106,7 +107,10 @@ impl Tree {
 struct Ctx<'a> {
     corners: &'a [[Vec3; 3]],
     params: &'a BuildParams,
+    /// Object-split bins.
     bins: usize,
+    /// Spatial-split bins.
+    spatial_bins: usize,
     /// `α` times the root's area.
     min_overlap: f32,
     growth: Vec3,
@@ -224,7 +228,7 @@ impl Ctx<'_> {
     /// Chopped spatial binning over `bounds` on every axis (sec. 4.2) and the cheapest
     /// plane that splits at most `budget` references.
     fn best_spatial_split(&self, refs: &[Ref], bounds: &Aabb, budget: usize) -> Option<SpatialSplit> {
-        let k = self.bins;
+        let k = self.spatial_bins;
         let n = refs.len() as u32;
         let extent = bounds.extent();
         let mut best: Option<SpatialSplit> = None;

@@ -4,7 +4,8 @@
 
 use crate::blas::Blas;
 use crate::{
-    child_order, invert_transform, refit, sah, wide, BuildParams, InstanceRecord, SceneAccel, MERGED,
+    child_order, collapse, invert_transform, refit, sah, wide, BuildParams, InstanceRecord, SceneAccel,
+    MERGED,
 };
 use filtrace_core::{Aabb, Affine3A};
 use filtrace_scene::Scene;
@@ -53,12 +54,12 @@ impl SceneAccel {
             objects.push(MERGED);
         }
         let boxes: Vec<Aabb> = objects.iter().map(|&o| self.object_bounds(o)).collect();
-        let (root, order) = sah::build_binary(
-            &boxes,
-            &BuildParams { max_leaf_size: 2, leaf_block: 1, ..self.params.clone() },
-        );
-        self.tlas =
-            root.as_ref().map(|r| wide::collapse(r, &mut |first, count| (first, count))).unwrap_or_default();
+        let params = BuildParams { max_leaf_size: 2, leaf_block: 1, ..self.params.clone() };
+        let (root, order) = sah::build_binary(&boxes, &params);
+        self.tlas = root
+            .as_ref()
+            .map(|r| collapse::collapse_sah(r, &params, &mut |first, count| (first, count)))
+            .unwrap_or_default();
         self.tlas_order = order.iter().map(|&k| objects[k as usize]).collect();
         self.order_tlas_for_any_hit();
         self.single = (objects.len() == 1).then(|| objects[0]);

@@ -4,14 +4,13 @@
 //!
 //! The wide tree is obtained by collapsing the binary SAH tree (Dammertz, Hanika and Keller,
 //! "Shallow Bounding Volume Hierarchies for Fast SIMD Ray Tracing of Incoherent Rays",
-//! EGSR 2008; Wald, Benthin and Boulos, "Getting rid of packets", 2008): starting from a
-//! node's two children, the child with the largest surface area is repeatedly replaced by
-//! its own two children until there are four. Traversal visits hit children near-first
+//! EGSR 2008; Wald, Benthin and Boulos, "Getting rid of packets", 2008), choosing the
+//! cheapest wide tree by the SAH (`collapse.rs`). Traversal visits hit children near-first
 //! and skips stack entries farther than the closest hit found so far. The slab distances
 //! are widened by `1 + 2 gamma_3` as in Ize, "Robust BVH Ray Traversal" (JCGT 2013), so
 //! rounding never culls a box the ray touches.
 
-use crate::sah::{BuildNode, MAX_DEPTH};
+use crate::sah::MAX_DEPTH;
 use filtrace_core::{Aabb, Vec3};
 use std::mem::MaybeUninit;
 
@@ -59,66 +58,6 @@ impl<const W: usize> WideNode<W> {
             self.bounds[k][i] = a.min[k];
             self.bounds[k + 3][i] = a.max[k];
         }
-    }
-}
-
-/// Collapses a binary build tree into wide nodes; the root is always `nodes[0]` (an inner
-/// node, even when the whole tree is one leaf). `leaf(first, count)` stores a binary leaf
-/// (primitives `order[first..first+count]`) and returns its wide-leaf reference
-/// `(child, count)`, `count > 0`.
-pub(crate) fn collapse<const W: usize>(
-    root: &BuildNode,
-    leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
-) -> Vec<WideNode<W>> {
-    let mut nodes = vec![WideNode::EMPTY];
-    fill(0, root, &mut nodes, leaf);
-    nodes
-}
-
-/// Fills wide node `index` from binary node `node`. The inner children of a node are
-/// allocated next to each other, so that a node's children share pages and adjacent
-/// cache lines (this and the prefetches in `traverse` cut cache-miss stalls, which
-/// dominate incoherent rays).
-fn fill<const W: usize>(
-    index: usize,
-    node: &BuildNode,
-    nodes: &mut Vec<WideNode<W>>,
-    leaf: &mut impl FnMut(u32, u32) -> (u32, u32),
-) {
-    let mut kids: Vec<&BuildNode> = Vec::with_capacity(W);
-    match node {
-        BuildNode::Leaf { .. } => kids.push(node),
-        BuildNode::Inner { children, .. } => kids.extend(children.iter()),
-    }
-    // Open the largest inner child until there are `W` (Dammertz et al. 2008).
-    while kids.len() < W {
-        let largest = kids
-            .iter()
-            .enumerate()
-            .filter(|(_, k)| matches!(k, BuildNode::Inner { .. }))
-            .max_by(|a, b| a.1.bounds().surface_area().total_cmp(&b.1.bounds().surface_area()))
-            .map(|(i, _)| i);
-        let Some(i) = largest else { break };
-        let BuildNode::Inner { children, .. } = kids.swap_remove(i) else { unreachable!() };
-        kids.extend(children.iter());
-    }
-    let mut inner = Vec::with_capacity(W);
-    for (slot, kid) in kids.into_iter().enumerate() {
-        let (child, count) = match kid {
-            BuildNode::Leaf { first, count, .. } => leaf(*first, *count),
-            BuildNode::Inner { .. } => {
-                nodes.push(WideNode::EMPTY);
-                inner.push((nodes.len() - 1, kid));
-                (nodes.len() as u32 - 1, 0)
-            }
-        };
-        let n = &mut nodes[index];
-        n.set_child_box(slot, &kid.bounds());
-        n.child[slot] = child;
-        n.count[slot] = count;
-    }
-    for (i, kid) in inner {
-        fill(i, kid, nodes, leaf);
     }
 }
 

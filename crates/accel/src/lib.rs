@@ -18,7 +18,8 @@
 //!
 //! Both levels are built by the same binary **binned SAH** builder ([`sah`]; MacDonald &
 //! Booth 1990, Wald 2007; leaf costs count 4-triangle blocks as Embree's do), then
-//! collapsed into a **4-wide BVH** (Dammertz et al. 2008) whose four child boxes are
+//! collapsed into a **4-wide BVH** (Dammertz et al. 2008), the SAH-cheapest one by
+//! dynamic programming (Ylitie et al. 2017, `collapse.rs`), whose four child boxes are
 //! tested with one SSE slab test (Williams et al. 2005, robust per Ize 2013). Traversal is
 //! near-first for closest hits, in an order fixed at build time for any hits (likely hits
 //! for little work first, `child_order.rs`), and prefetches the children it will visit. Triangles are copied into leaf order as 4-wide SoA packets and tested four

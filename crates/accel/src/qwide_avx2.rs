@@ -13,7 +13,7 @@
 
 use crate::avx2::{Node8Layout, RayBoxes8};
 use crate::qwide::QNode8;
-use crate::wide::{cull_bound, FAR_SCALE};
+use crate::wide::FAR_SCALE;
 use std::arch::x86_64::*;
 
 /// The eight decoded bounds of grid row `row` (byte offset `8 row`, as the float row
@@ -26,11 +26,11 @@ unsafe fn plane(n: &QNode8, offset: usize, k: usize) -> __m256 {
     _mm256_fmadd_ps(q, _mm256_set1_ps(n.scale[k]), _mm256_set1_ps(n.origin[k]))
 }
 
-/// Slab test of a ray against the eight decoded child boxes of `n`: hit mask (bit `i` for
-/// child `i`, unused slots never set) and entry distances. The operations after decoding
-/// are those of `avx2::box8`.
+/// Slab test of a ray against the eight decoded child boxes of `n`, given `cull`
+/// (`cull_bound(t_max)` splatted): hit mask (bit `i` for child `i`, unused slots never
+/// set) and entry distances. The operations after decoding are those of `avx2::box8`.
 #[inline(always)]
-pub(crate) unsafe fn qbox8(n: &QNode8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+pub(crate) unsafe fn qbox8(n: &QNode8, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
     // SAFETY: AVX2 and FMA (the caller's target features); row offsets are below 48.
     // (Written out: a closure would not inherit the target features.)
     let (nx, fx, ny, fy, nz, fz) = unsafe {
@@ -44,7 +44,7 @@ pub(crate) unsafe fn qbox8(n: &QNode8, r: &RayBoxes8, t_min: __m256, t_max: f32)
         )
     };
     let t_near = _mm256_max_ps(nz, _mm256_max_ps(ny, _mm256_max_ps(nx, t_min)));
-    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, _mm256_set1_ps(cull_bound(t_max)))));
+    let t_far = _mm256_min_ps(fz, _mm256_min_ps(fy, _mm256_min_ps(fx, cull)));
     let t_far = _mm256_mul_ps(t_far, _mm256_set1_ps(FAR_SCALE));
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_near, t_far)) as u32;
     (mask & n.valid, t_near)
@@ -56,9 +56,9 @@ impl Node8Layout for QNode8 {
     const LINES: usize = 2;
 
     #[inline(always)]
-    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
         // SAFETY: AVX2 and FMA (the caller's).
-        unsafe { qbox8(self, r, t_min, t_max) }
+        unsafe { qbox8(self, r, t_min, cull) }
     }
 
     #[inline(always)]
@@ -72,7 +72,7 @@ mod tests {
     use super::*;
     use crate::avx2::box8;
     use crate::testmesh::{grazing_ray, SplitMix64};
-    use crate::wide::Node8;
+    use crate::wide::{cull_bound, Node8};
     use filtrace_core::{Aabb, Vec3};
 
     /// The compressed test keeps every box the uncompressed test keeps (its boxes contain
@@ -103,8 +103,8 @@ mod tests {
             let q = QNode8::compress(&node).unwrap();
             // SAFETY: checked `has_avx2()` above.
             let (exact, coarse) = unsafe {
-                let r = RayBoxes8::new(o, d);
-                (box8(&node, &r, _mm256_setzero_ps(), t_max).0, qbox8(&q, &r, _mm256_setzero_ps(), t_max).0)
+                let (r, cull) = (RayBoxes8::new(o, d), _mm256_set1_ps(cull_bound(t_max)));
+                (box8(&node, &r, _mm256_setzero_ps(), cull).0, qbox8(&q, &r, _mm256_setzero_ps(), cull).0)
             };
             assert_eq!(exact & !coarse, 0, "culled a box the exact test keeps: o {o} d {d} node {node:?}");
             assert_eq!(coarse & !q.valid, 0, "unused slots never hit");

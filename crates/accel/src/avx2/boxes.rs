@@ -1,7 +1,7 @@
 //! The 8-wide slab test of one ray against a node's eight child boxes, and the node
 //! layouts the traversal loop ([`super::traverse`]) runs over.
 
-use crate::wide::{cull_bound, octant_rows, Entry, Node8, FAR_SCALE};
+use crate::wide::{octant_rows, Entry, Node8, FAR_SCALE};
 use filtrace_core::Vec3;
 use std::arch::x86_64::*;
 
@@ -72,17 +72,11 @@ impl RayBoxes8 {
     }
 }
 
-/// Slab test of a ray against the eight child boxes of `n`: hit mask (bit `i` for child
-/// `i`) and entry distances.
+/// Slab test of a ray on `[t_min, t_max]` against the eight child boxes of `n`, given
+/// `cull`, the cull bound `cull_bound(t_max)` splatted: hit mask (bit `i` for child `i`)
+/// and entry distances.
 #[inline(always)]
-pub(crate) unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
-    // SAFETY: as `box8_within`.
-    unsafe { box8_within(n, r, t_min, _mm256_set1_ps(cull_bound(t_max))) }
-}
-
-/// [`box8`] with the cull bound `cull_bound(t_max)` splatted by the caller.
-#[inline(always)]
-pub(crate) unsafe fn box8_within(n: &Node8, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
+pub(crate) unsafe fn box8(n: &Node8, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
     let b = n.bounds.as_ptr() as *const f32;
     // SAFETY: `Node8` is 64-byte aligned and its bound rows are 32 bytes, so every row is
     // 32-byte aligned; the row offsets are `8 * row` with `row < 6`.
@@ -115,20 +109,12 @@ pub(crate) trait Node8Layout {
     /// Cache lines of one node (2 or 4), prefetched before a child node is visited.
     const LINES: usize;
 
-    /// Slab test of the ray `r` on `[t_min, t_max]` against the eight child boxes: hit mask
-    /// (bit `i` for child `i`, empty slots never set) and entry distances. Safety: the
-    /// caller runs with AVX2 and FMA.
-    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256);
-
-    /// [`Self::boxes`] given also `cull`, `cull_bound(t_max)` splatted, which the loop
-    /// works out again only when a leaf visit may have shortened `t_max` (at every node,
-    /// a closest-hit query spent 7 instructions on it). By default it is not used.
-    #[inline(always)]
-    unsafe fn boxes_within(&self, r: &RayBoxes8, t_min: __m256, t_max: f32, cull: __m256) -> (u32, __m256) {
-        let _ = cull;
-        // SAFETY: as `boxes`.
-        unsafe { self.boxes(r, t_min, t_max) }
-    }
+    /// Slab test of the ray `r` on `[t_min, t_max]` against the eight child boxes, given
+    /// `cull`, `cull_bound(t_max)` splatted (the loop works it out again only when a
+    /// leaf visit may have shortened `t_max`; at every node, a closest-hit query spent 7
+    /// instructions on it): hit mask (bit `i` for child `i`, empty slots never set) and
+    /// entry distances. Safety: the caller runs with AVX2 and FMA.
+    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256);
 
     /// Child `i`: `(node index, 0)` for an inner node, `(first packet, packet count)` for
     /// a leaf.
@@ -146,15 +132,9 @@ impl Node8Layout for Node8 {
     const LINES: usize = 4;
 
     #[inline(always)]
-    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, t_max: f32) -> (u32, __m256) {
+    unsafe fn boxes(&self, r: &RayBoxes8, t_min: __m256, cull: __m256) -> (u32, __m256) {
         // SAFETY: AVX2 and FMA (the caller's).
-        unsafe { box8(self, r, t_min, t_max) }
-    }
-
-    #[inline(always)]
-    unsafe fn boxes_within(&self, r: &RayBoxes8, t_min: __m256, _: f32, cull: __m256) -> (u32, __m256) {
-        // SAFETY: AVX2 and FMA (the caller's).
-        unsafe { box8_within(self, r, t_min, cull) }
+        unsafe { box8(self, r, t_min, cull) }
     }
 
     #[inline(always)]
@@ -167,6 +147,7 @@ impl Node8Layout for Node8 {
 mod tests {
     use super::*;
     use crate::testmesh::{grazing_ray, SplitMix64};
+    use crate::wide::cull_bound;
 
     /// The fused box test never culls a box that the ray touches, checked against an
     /// `f64` slab test on rays that graze boxes: origins on faces, edges and corners,
@@ -223,7 +204,9 @@ mod tests {
                 node.bounds[a + 3][k % 8] = hi[a];
             }
             // SAFETY: checked `has_avx2()` above.
-            let mask = unsafe { box8(&node, &RayBoxes8::new(o, d), _mm256_setzero_ps(), t_max).0 };
+            let mask = unsafe {
+                box8(&node, &RayBoxes8::new(o, d), _mm256_setzero_ps(), _mm256_set1_ps(cull_bound(t_max))).0
+            };
             assert_eq!(mask & !(1 << (k % 8)), 0, "empty slots never hit");
             if exact(o, d, lo, hi, t_max) {
                 touched += 1;

@@ -128,7 +128,7 @@ unsafe fn traversal8<N: Node8Layout, L: Leaves, const ORDERED: bool>(
             // `qwide::validate`).
             let node = unsafe { nodes.get_unchecked(cur.child as usize) };
             // SAFETY: this function runs with AVX2 (its target features).
-            let (mask, tn) = unsafe { node.boxes_within(r, t_min8, *t_max, cull8) };
+            let (mask, tn) = unsafe { node.boxes(r, t_min8, cull8) };
             if mask != 0 {
                 // Any hits keep no distances, as Embree's occlusion stack (see the pop).
                 if ORDERED {

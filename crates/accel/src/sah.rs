@@ -110,28 +110,21 @@ const SPLIT_BUDGET: f32 = 0.0;
 pub const MIN_QUANTIZED_TRIANGLES: usize = 2_000_000;
 
 impl BuildParams {
-    /// Fewest bins: fastest build, slightly slower traversal.
+    /// Fewest bins and no spatial splits: fastest build, slightly slower traversal.
     pub fn fastest_build() -> Self {
         Self {
             bins: 8,
             spatial_bins: 8,
-            max_leaf_size: 8,
-            traversal_cost: 1.0,
-            intersection_cost: 1.0,
-            leaf_block: 4,
-            parallel_threshold: 4096,
-            max_flat_triangles: 40,
-            split_budget: SPLIT_BUDGET,
-            min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
             spatial_split_budget: 0.0,
             max_spatial_split_references: 0,
+            ..Self::balanced()
         }
     }
 
     /// The default: 32 object bins, 16 spatial bins. 32 object bins over 16 (1 thread,
     /// incoherent closest hits, `docs/perf-accel.md` "Stop 22"): teapot +3-7 %,
-    /// bunny-room +5 %, grass-1m +5-13 %; the build takes 3-5 % longer. 32 spatial bins
-    /// would double the build of grass and bunny-room for no measured gain.
+    /// bunny-room +5 %, grass-1m +5-13 %, for a build up to 25 % longer (grass). 32
+    /// spatial bins would double the build of grass and bunny-room for no measured gain.
     pub fn balanced() -> Self {
         Self {
             bins: 32,
@@ -152,20 +145,7 @@ impl BuildParams {
     /// 32 bins for spatial splits too, and spatial splits on meshes of any size: better
     /// trees for static scenes, about twice the build.
     pub fn high_quality() -> Self {
-        Self {
-            bins: 32,
-            spatial_bins: 32,
-            max_leaf_size: 8,
-            traversal_cost: 1.0,
-            intersection_cost: 1.0,
-            leaf_block: 4,
-            parallel_threshold: 4096,
-            max_flat_triangles: 40,
-            split_budget: SPLIT_BUDGET,
-            min_quantized_triangles: MIN_QUANTIZED_TRIANGLES,
-            spatial_split_budget: SPATIAL_SPLIT_BUDGET,
-            max_spatial_split_references: usize::MAX,
-        }
+        Self { spatial_bins: 32, max_spatial_split_references: usize::MAX, ..Self::balanced() }
     }
 
     /// Every preset, for tests.

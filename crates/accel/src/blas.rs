@@ -199,7 +199,8 @@ impl Blas {
         }
     }
 
-    /// Expected node visits plus packet tests of a random ray through the root box.
+    /// Expected node visits plus leaf tests of a random ray through the root box
+    /// (`refit::sah_cost`).
     pub(crate) fn sah_cost(&self) -> f64 {
         match self {
             Blas::Bvh4(b) => refit::sah_cost(&b.nodes),

@@ -137,9 +137,9 @@ impl<'a, const W: usize> Table<'a, W> {
         }
     }
 
-    /// Fills wide node `index` with the roots `kids`; inner children are allocated next
-    /// to each other, after their parent (as the greedy collapse does: `refit` and the
-    /// prefetches rely on it).
+    /// Fills wide node `index` with the roots `kids`. Inner children are allocated next
+    /// to each other, after their parent: `refit` relies on the order, and a node's
+    /// children then share pages and adjacent cache lines for the prefetches.
     fn fill(
         &self,
         index: usize,

@@ -189,8 +189,10 @@ pub struct BvhStats {
     /// than one leaf ([`BuildParams::split_budget`], [`BuildParams::spatial_split_budget`]).
     pub references: usize,
     pub top_level_nodes: usize,
-    /// SAH cost of the wide bottom levels (node visits + packet tests per random ray
-    /// hitting the root box, relative to the root area), summed over meshes.
+    /// SAH cost of the wide bottom levels (node visits + leaf tests per random ray
+    /// hitting the root box, relative to the root area; a leaf test is one packet 4-wide,
+    /// a pair of packets 8-wide: since stop 22, before which 8-wide trees counted packets),
+    /// summed over meshes.
     pub sah_cost: f64,
 }
 

@@ -132,16 +132,6 @@ impl VplArgs {
         Ok(s)
     }
 
-    /// What the spinner says while a frame's VPLs and importance cache are built.
-    fn preparing_message(&self) -> String {
-        let cached = !self.ground_truth && self.vpl_sampler.needs_cache();
-        if cached {
-            format!("building {} VPLs and an importance cache of {} records", self.vpls, self.cache_points)
-        } else {
-            format!("building {} VPLs", self.vpls)
-        }
-    }
-
     /// Whether the integrator carries state from frame to frame (`optimized`): a frame of
     /// a sequence then depends on the frames before it, and `--resume` needs their state.
     pub fn carries_state(&self) -> bool {
@@ -251,6 +241,20 @@ impl Summary {
 }
 
 impl VplRun<'_> {
+    /// What a frame's progress display says while its VPLs (and importance cache, where
+    /// the sampler reads one) are built.
+    pub fn preparing_message(&self) -> String {
+        let vs = &self.settings;
+        if !vs.ground_truth && vs.sampler.needs_cache() {
+            format!(
+                "building {} VPLs and an importance cache of {} records",
+                vs.vpls.count, vs.cache.cache_points
+            )
+        } else {
+            format!("building {} VPLs", vs.vpls.count)
+        }
+    }
+
     /// Brings `renderer` to render `frame` with the VPL integrator: a still scene, which
     /// the sequence does not move, is moved to the frame number here so that its VPLs
     /// follow it too ([`frame_vpl_seed`]); the integrator is set the first time (which
@@ -376,7 +380,7 @@ pub fn run(c: &CommonArgs, v: &VplArgs) -> anyhow::Result<()> {
     let mut run = VplRun { c, settings: vs, pool: &pool, cancel: ctrlc.flag(), carried: None };
     // The integrator's `prepare`: VPLs, G-buffer and importance cache of the frame.
     let frame = renderer.frame().index;
-    let preparing = spinner(&v.preparing_message());
+    let preparing = spinner(&run.preparing_message());
     run.prepare(&mut renderer, frame)?;
     preparing.finish_and_clear();
     test_hook("built", ctrlc.flag());

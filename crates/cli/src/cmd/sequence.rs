@@ -238,7 +238,7 @@ impl Engine<'_> {
             Engine::Vpl(run, renderer) => {
                 // The bar counts samples; until they start it says what the frame is doing.
                 let label = bar.message();
-                bar.set_message(format!("{label}: building the VPLs and the importance cache"));
+                bar.set_message(format!("{label}: {}", run.preparing_message()));
                 bar.tick();
                 run.prepare(renderer, stamp.frame as i64)?;
                 bar.set_message(label);

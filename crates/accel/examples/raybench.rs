@@ -17,8 +17,8 @@
 use filtrace_accel::bench::{ray_bench, RayBenchOptions};
 
 const USAGE: &str = "usage: raybench SCENE [--rays N] [--res WxH] [--threads T] [--repeats K]
-  [--bins K] [--leaf N] [--ctrav C] [--flat N] [--block N] [--split B] [--spatial B]
-  [--qnodes N|max] [--json] [--write-obj PATH]
+  [--bins K] [--spatial-bins K] [--leaf N] [--ctrav C] [--flat N] [--block N] [--split B]
+  [--spatial B] [--qnodes N|max] [--json] [--write-obj PATH]
 SCENE: a scene file or built-in name, sphere:N, blades:N or grass:N
 --split B: pre-splitting of long thin triangles, up to B*n extra references
 --spatial B: spatial splits (SBVH), up to B*n extra references (0: off)
@@ -47,6 +47,9 @@ fn main() -> Result<(), String> {
                 opts.height = h.parse().map_err(|e| format!("--res: {e}"))?;
             }
             "--bins" => opts.build.bins = val()?.parse().map_err(|e| format!("--bins: {e}"))?,
+            "--spatial-bins" => {
+                opts.build.spatial_bins = val()?.parse().map_err(|e| format!("--spatial-bins: {e}"))?
+            }
             "--leaf" => opts.build.max_leaf_size = val()?.parse().map_err(|e| format!("--leaf: {e}"))?,
             "--ctrav" => opts.build.traversal_cost = val()?.parse().map_err(|e| format!("--ctrav: {e}"))?,
             "--flat" => opts.build.max_flat_triangles = val()?.parse().map_err(|e| format!("--flat: {e}"))?,

@@ -124,7 +124,8 @@ impl BuildParams {
     /// The default: 32 object bins, 16 spatial bins. 32 object bins over 16 (1 thread,
     /// incoherent closest hits, `docs/perf-accel.md` "Stop 22"): teapot +3-7 %,
     /// bunny-room +5 %, grass-1m +5-13 %, for a build up to 25 % longer (grass). 32
-    /// spatial bins would double the build of grass and bunny-room for no measured gain.
+    /// spatial bins would make the build of grass and bunny-room 55-65 % longer again
+    /// for no measured gain.
     pub fn balanced() -> Self {
         Self {
             bins: 32,
